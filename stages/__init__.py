@@ -1,0 +1,1 @@
+"""LiveScene workflow stages: one package per stage, each with a CLI."""

@@ -1,0 +1,67 @@
+"""``livescene <stage> ...``: one console script, one subcommand per stage.
+
+A subcommand exists only when its stage package is installed in this tree,
+so nothing answers "not implemented". Each stage's ``cli.main(argv)`` does the
+work; ``python -m stages.<name>`` calls the same function.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+
+# subcommand -> (module holding main(argv), one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "capture": ("stages.capture.cli", "generate a synthetic interactive-room capture with ground truth"),
+    "frames": ("stages.frames.cli", "extract frames (with source index and sharpness) from a video"),
+    "poses": ("stages.poses.cli", "estimate camera poses with COLMAP (pycolmap)"),
+    "labels": ("stages.labels.cli", "ingest object masks in any supported format"),
+    "states": ("stages.states.cli", "interpolate key-frame interaction variables to every frame"),
+    "scene": ("stages.scene.cli", "validate, inspect and assemble scene datasets"),
+    "train": ("stages.model.train_cli", "train LiveScene or a baseline on a scene dataset"),
+    "render": ("stages.model.render_cli", "render any pose with any object states from a trained run"),
+    "compare": ("stages.model.compare_cli", "train every method for the same wall-clock budget"),
+    "evaluate": ("stages.evaluate.cli", "metrics, unseen-state control and grounding for a trained run"),
+    "control": ("stages.evaluate.control_cli", "set object states from language commands"),
+    "report": ("stages.report.cli", "write the self-contained HTML report"),
+    "stability": ("stages.stability.cli", "run the numerical-stability suite and print its table"),
+}
+
+
+def available() -> dict[str, tuple[str, str]]:
+    out = {}
+    for name, (module, help_) in COMMANDS.items():
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:
+            found = False
+        if found:
+            out[name] = (module, help_)
+    return out
+
+
+def usage(commands: dict[str, tuple[str, str]]) -> str:
+    width = max(len(n) for n in commands) if commands else 0
+    lines = ["usage: livescene <command> [options]", "", "commands:"]
+    lines += [f"  {n.ljust(width)}  {h}" for n, (_, h) in commands.items()]
+    lines += ["", "`livescene <command> --help` describes each command."]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    commands = available()
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage(commands))
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in commands:
+        print(f"livescene: unknown command {name!r}\n\n{usage(commands)}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(commands[name][0])
+    return int(module.main(rest) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,39 @@
+"""``livescene scene``: inspect and validate scene datasets."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from .dataset import read_scene
+from .errors import InputError
+
+
+def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    v = sub.add_parser("validate", help="check a scene dataset against the contract")
+    v.add_argument("path", help="scene dataset folder (holds transforms.json)")
+    v.add_argument("--deep", action="store_true", help="also open every image to check its size")
+    i = sub.add_parser("info", help="print a JSON summary of a scene dataset")
+    i.add_argument("path")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        ds = read_scene(args.path, validate=True, deep=getattr(args, "deep", False))
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.command == "validate":
+        print(f"{args.path}: valid scene dataset, {len(ds.frames)} frames, objects {ds.objects}")
+    else:
+        splits = {s: len(ds.frames_in(s)) for s in ("train", "test")}
+        print(json.dumps({"frames": len(ds.frames), "objects": ds.objects, "splits": splits,
+                          "camera": {"w": ds.camera.width, "h": ds.camera.height, "fx": ds.camera.fx},
+                          "key_frames": len(ds.key_frames), "has_masks": ds.has_masks,
+                          "scene_box": None if ds.scene_box is None else ds.scene_box.tolist()}, indent=2))
+    return 0

@@ -1,0 +1,317 @@
+"""The scene dataset: read, write and validate the folder every stage shares.
+
+Layout (that of the published LiveScene sets, plus optional extensions)::
+
+    transforms.json        nerfstudio or Blender form; frames may carry
+                           "state" {object: value}, "split", "source_index"
+    images/                one image per frame, frame id = last "_" token of the stem
+    masks/<fid>.npy        bool H x W x (objects + 1), background last
+    mapping.yaml           {int_id: object name}; channel order = sorted ids
+    key_frame_value.yaml   {<name>_<fid>: {object: value}}, sparse
+    prompts.yaml           optional {object: {synonyms: [...], description: str}}
+    scene.json             optional: scene box, units, normalisation, provenance
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+
+from .atomic_io import write_json, write_yaml
+from .camera import Camera
+from .errors import SceneError
+from .keyframes import frame_id_of, read_key_frames, write_key_frames
+from .masks import mask_path, read_mask
+from .transforms import camera_from_dict, camera_to_dict, load_json, parse_pose, resolve_image_path
+
+
+@dataclass
+class Frame:
+    """One posed image of the capture."""
+
+    file_path: str
+    """Image path relative to the dataset root, as written in transforms.json."""
+    c2w: np.ndarray
+    """4x4 camera-to-world matrix, OpenGL camera axes."""
+    state: dict[str, float] | None = None
+    """Interaction variable per object name (0 closed, 1 open), when known."""
+    split: str | None = None
+    """"train" or "test"; None when the file does not say."""
+    camera: Camera | None = None
+    """Per-frame intrinsics; None = the dataset's shared camera."""
+    source_index: int | None = None
+    """Index of this frame in the source video, when it came from one."""
+
+    @property
+    def frame_id(self) -> str:
+        return frame_id_of(Path(self.file_path).stem)
+
+
+@dataclass
+class SceneDataset:
+    """A scene dataset in memory; images and masks stay on disk and load on demand."""
+
+    root: Path
+    camera: Camera
+    frames: list[Frame]
+    objects: list[str]
+    """Object names in mask-channel order (background is the extra last channel)."""
+    object_ids: list[int] = field(default_factory=list)
+    """The ids of mapping.yaml, aligned with ``objects``."""
+    key_frames: dict[str, dict[str, float]] = field(default_factory=dict)
+    scene_box: np.ndarray | None = None
+    """[[xmin, ymin, zmin], [xmax, ymax, zmax]] in the coordinates of the poses."""
+    prompts: dict[str, dict[str, Any]] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    """Other scene.json fields (units, normalisation, provenance, ...)."""
+
+    def __post_init__(self) -> None:
+        if not self.object_ids:
+            self.object_ids = list(range(len(self.objects)))
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.objects)
+
+    @property
+    def has_masks(self) -> bool:
+        return (self.root / "masks").is_dir()
+
+    def camera_of(self, frame: Frame) -> Camera:
+        return frame.camera or self.camera
+
+    def image_path(self, frame: Frame) -> Path:
+        return resolve_image_path(self.root, frame.file_path)
+
+    def load_image(self, frame: Frame) -> np.ndarray:
+        """RGB float32 image in [0, 1], ``[H, W, 3]`` (alpha composited on white if present)."""
+        path = self.image_path(frame)
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise SceneError(path, "image missing or unreadable", "restore the image or drop the frame")
+        if img.ndim == 2:
+            img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        scale = 65535.0 if img.dtype == np.uint16 else 255.0
+        img = img.astype(np.float32) / scale
+        if img.shape[2] == 4:
+            alpha = img[..., 3:4]
+            img = img[..., :3] * alpha + (1.0 - alpha)
+        return np.ascontiguousarray(img[..., ::-1])
+
+    def load_mask(self, frame: Frame) -> np.ndarray:
+        cam = self.camera_of(frame)
+        return read_mask(self.root, frame.frame_id, cam.height, cam.width, self.n_objects)
+
+    def frames_in(self, split: str) -> list[Frame]:
+        return [f for f in self.frames if (f.split or "train") == split]
+
+    def state_matrix(self, frames: list[Frame] | None = None) -> np.ndarray:
+        """``[n_frames, n_objects]`` states; NaN where a frame carries none."""
+        frames = self.frames if frames is None else frames
+        out = np.full((len(frames), self.n_objects), np.nan, dtype=np.float64)
+        for i, f in enumerate(frames):
+            if f.state:
+                for j, name in enumerate(self.objects):
+                    if name in f.state:
+                        out[i, j] = f.state[name]
+        return out
+
+
+def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
+    if not path.is_file():
+        return [], []
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise SceneError(path, f"not valid YAML ({exc})", "repair the file") from exc
+    if not isinstance(raw, dict):
+        raise SceneError(path, "top level is not a mapping", "write {int_id: object_name}")
+    items: list[tuple[int, str]] = []
+    for k, v in raw.items():
+        try:
+            items.append((int(k), str(v)))
+        except (TypeError, ValueError) as exc:
+            raise SceneError(path, f"id {k!r} is not an integer", "write {int_id: object_name}") from exc
+    items.sort()
+    names = [n for _, n in items]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise SceneError(path, f"object names {dupes} appear more than once", "give each object one unique name")
+    return [i for i, _ in items], names
+
+
+def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -> SceneDataset:
+    """Read a scene dataset; with ``validate`` the contract is checked (``deep`` opens every image)."""
+    root = Path(root)
+    tpath = root / "transforms.json"
+    data = load_json(tpath)
+    object_ids, objects = _read_mapping(root / "mapping.yaml")
+    frames_raw = data.get("frames")
+    if not isinstance(frames_raw, list) or not frames_raw:
+        raise SceneError(tpath, "no \"frames\" list (or it is empty)", "write one entry per posed image")
+
+    image_hw = None
+    if "camera_angle_x" in data and not ("w" in data and "h" in data):
+        first = frames_raw[0].get("file_path", "") if isinstance(frames_raw[0], dict) else ""
+        img = cv2.imread(str(resolve_image_path(root, first)), cv2.IMREAD_UNCHANGED)
+        if img is not None:
+            image_hw = img.shape[:2]
+    shared = None
+    if any(k in data for k in ("fl_x", "camera_angle_x")):
+        shared = camera_from_dict(data, tpath, "top level", image_hw)
+
+    frames: list[Frame] = []
+    for i, fr in enumerate(frames_raw):
+        where = f"frames[{i}]"
+        if not isinstance(fr, dict):
+            raise SceneError(tpath, f"{where} is not an object", "write {file_path, transform_matrix}")
+        for key in ("file_path", "transform_matrix"):
+            if key not in fr:
+                raise SceneError(tpath, f"{where} has no {key!r}", f"add {key!r} to every frame")
+        where = f"{where} ({fr['file_path']})"
+        c2w = parse_pose(fr["transform_matrix"], tpath, where)
+        cam = camera_from_dict(fr, tpath, where) if "fl_x" in fr else None
+        if cam is None and shared is None:
+            raise SceneError(tpath, f"{where}: no intrinsics at top level or in the frame",
+                             "add fl_x, fl_y, cx, cy, w, h or camera_angle_x")
+        state = fr.get("state")
+        if state is not None:
+            if not isinstance(state, dict):
+                raise SceneError(tpath, f"{where}: state is not a mapping of object to value",
+                                 "write \"state\": {object: value}")
+            state = {str(k): float(v) for k, v in state.items()}
+            bad = [k for k, v in state.items() if not np.isfinite(v)]
+            if bad:
+                raise SceneError(tpath, f"{where}: state of {bad} is not finite",
+                                 "re-run `livescene states` to interpolate the states")
+        split = fr.get("split")
+        if split is not None and split not in ("train", "test"):
+            raise SceneError(tpath, f"{where}: split {split!r} is neither 'train' nor 'test'",
+                             "write \"split\": \"train\" or \"test\"")
+        src = fr.get("source_index")
+        frames.append(Frame(file_path=str(fr["file_path"]), c2w=c2w, state=state, split=split, camera=cam,
+                            source_index=None if src is None else int(src)))
+    camera = shared or frames[0].camera  # type: ignore[assignment]
+
+    meta: dict[str, Any] = {}
+    scene_box = None
+    spath = root / "scene.json"
+    if spath.is_file():
+        meta = load_json(spath)
+        if "scene_box" in meta:
+            scene_box = np.asarray(meta.pop("scene_box"), dtype=np.float64)
+            if scene_box.shape != (2, 3) or not np.isfinite(scene_box).all() or (scene_box[1] <= scene_box[0]).any():
+                raise SceneError(spath, f"scene_box {scene_box.tolist()} is not [[min xyz], [max xyz]] with min < max",
+                                 "re-estimate it with `livescene poses` or fix it by hand")
+    prompts: dict[str, dict[str, Any]] = {}
+    ppath = root / "prompts.yaml"
+    if ppath.is_file():
+        prompts = yaml.safe_load(ppath.read_text()) or {}
+
+    key_frames = read_key_frames(root / "key_frame_value.yaml", objects or None)
+    ds = SceneDataset(root=root, camera=camera, frames=frames, objects=objects, object_ids=object_ids,
+                      key_frames=key_frames, scene_box=scene_box, prompts=prompts, meta=meta)
+    if validate:
+        validate_scene(ds, deep=deep)
+    return ds
+
+
+def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
+    """Check the contract; raise the first SceneError found, naming file, problem and fix."""
+    tpath = ds.root / "transforms.json"
+    seen: dict[str, str] = {}
+    for f in ds.frames:
+        if f.frame_id in seen:
+            raise SceneError(tpath, f"frame id {f.frame_id!r} used by both {seen[f.frame_id]} and {f.file_path}",
+                             "give every image a unique last '_' token in its name")
+        seen[f.frame_id] = f.file_path
+        path = ds.image_path(f)
+        if not path.is_file():
+            raise SceneError(path, f"image named by {tpath.name} ({f.file_path}) not found",
+                             "restore the image or remove the frame from transforms.json")
+        if f.state is not None and ds.objects:
+            unknown = sorted(set(f.state) - set(ds.objects))
+            if unknown:
+                raise SceneError(tpath, f"frame {f.file_path}: state names unknown objects {unknown}",
+                                 f"use the names of mapping.yaml {ds.objects}")
+    if deep:
+        for f in ds.frames:
+            img = cv2.imread(str(ds.image_path(f)), cv2.IMREAD_UNCHANGED)
+            cam = ds.camera_of(f)
+            if img is None:
+                raise SceneError(ds.image_path(f), "image unreadable", "re-extract the frame")
+            if img.shape[:2] != (cam.height, cam.width):
+                raise SceneError(ds.image_path(f), f"image is {img.shape[1]}x{img.shape[0]} but transforms.json "
+                                 f"says {cam.width}x{cam.height}", "rescale the intrinsics or the images")
+    if ds.has_masks:
+        if not ds.objects:
+            raise SceneError(ds.root / "mapping.yaml", "masks/ exists but mapping.yaml is missing or empty",
+                             "write mapping.yaml {id: name} for the objects in the masks")
+        unlabeled = set(map(str, ds.meta.get("frames_without_masks", [])))
+        for f in ds.frames:
+            path = mask_path(ds.root, f.frame_id)
+            if not path.is_file():
+                if f.frame_id in unlabeled:
+                    continue
+                raise SceneError(path, f"frame {f.file_path} has no mask",
+                                 "ingest masks for every frame with `livescene labels`, or list the frame "
+                                 "under frames_without_masks in scene.json")
+            cam = ds.camera_of(f)
+            try:
+                arr = np.load(path, mmap_mode="r", allow_pickle=False)
+            except (ValueError, OSError) as exc:
+                raise SceneError(path, f"cannot read mask ({exc})", "re-export the mask as .npy") from exc
+            from .masks import check_mask_array
+
+            check_mask_array(arr, path, cam.height, cam.width, ds.n_objects)
+    known = set(seen)
+    kpath = ds.root / "key_frame_value.yaml"
+    for fid in ds.key_frames:
+        if fid not in known:
+            raise SceneError(kpath, f"key frame {fid!r} matches no frame in transforms.json",
+                             "key frames must use the frame id of an image (last '_' token of its name)")
+
+
+def write_scene(ds: SceneDataset, root: str | Path | None = None) -> Path:
+    """Write the metadata files of a dataset (images and masks are written by the caller)."""
+    root = Path(root) if root is not None else ds.root
+    root.mkdir(parents=True, exist_ok=True)
+    tdata: dict[str, Any] = camera_to_dict(ds.camera)
+    frames_out = []
+    for f in ds.frames:
+        entry: dict[str, Any] = {"file_path": f.file_path, "transform_matrix": np.asarray(f.c2w).tolist()}
+        if f.camera is not None and f.camera != ds.camera:
+            entry.update(camera_to_dict(f.camera))
+        if f.state is not None:
+            entry["state"] = {k: float(v) for k, v in f.state.items()}
+        if f.split is not None:
+            entry["split"] = f.split
+        if f.source_index is not None:
+            entry["source_index"] = int(f.source_index)
+        frames_out.append(entry)
+    tdata["frames"] = frames_out
+    write_json(root / "transforms.json", tdata)
+    if ds.objects:
+        write_yaml(root / "mapping.yaml", {int(i): n for i, n in zip(ds.object_ids, ds.objects, strict=True)})
+    if ds.key_frames:
+        write_key_frames(root / "key_frame_value.yaml", ds.key_frames)
+    if ds.prompts:
+        write_yaml(root / "prompts.yaml", ds.prompts)
+    meta = dict(ds.meta)
+    if ds.scene_box is not None:
+        meta["scene_box"] = np.asarray(ds.scene_box).tolist()
+    if meta:
+        write_json(root / "scene.json", json.loads(json.dumps(meta, default=_np_default)))
+    return root
+
+
+def _np_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic | np.ndarray):
+        return obj.tolist()
+    raise TypeError(type(obj).__name__)

@@ -1,0 +1,59 @@
+"""Per-frame object masks: ``masks/<fid>.npy``, bool ``H x W x (objects + 1)``, background last."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .atomic_io import write_npy
+from .errors import SceneError
+
+
+def mask_path(root: Path, frame_id: str) -> Path:
+    return Path(root) / "masks" / f"{frame_id}.npy"
+
+
+def check_mask_array(mask: np.ndarray, path: Path, height: int, width: int, n_objects: int) -> None:
+    expected = (height, width, n_objects + 1)
+    if mask.ndim != 3:
+        raise SceneError(path, f"mask has {mask.ndim} dimensions, expected H x W x (objects + 1) = {expected}",
+                         "re-export the masks with one channel per object plus a background channel")
+    if mask.shape[2] != n_objects + 1:
+        raise SceneError(path, f"mask has {mask.shape[2]} channels but mapping.yaml names {n_objects} objects "
+                         f"({n_objects + 1} expected with background last)",
+                         "re-export the masks with a background channel, or fix mapping.yaml")
+    if mask.shape[:2] != (height, width):
+        raise SceneError(path, f"mask is {mask.shape[1]}x{mask.shape[0]} but the image is {width}x{height}",
+                         "resize the masks to the image size with `livescene labels` (integer factors only)")
+
+
+def read_mask(root: Path, frame_id: str, height: int, width: int, n_objects: int) -> np.ndarray:
+    path = mask_path(root, frame_id)
+    if not path.is_file():
+        raise SceneError(path, "mask file not found", "ingest masks for every frame with `livescene labels`")
+    try:
+        mask = np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise SceneError(path, f"cannot read mask ({exc})", "re-export the mask as a .npy bool array") from exc
+    check_mask_array(mask, path, height, width, n_objects)
+    return mask.astype(bool, copy=False)
+
+
+def write_mask(root: Path, frame_id: str, mask: np.ndarray) -> Path:
+    path = mask_path(root, frame_id)
+    write_npy(path, np.ascontiguousarray(mask, dtype=bool))
+    return path
+
+
+def label_map_to_onehot(labels: np.ndarray, n_objects: int) -> np.ndarray:
+    """Integer label map (0..n-1 objects, n or -1 = background) -> one-hot bool mask."""
+    labels = np.where(labels < 0, n_objects, labels)
+    out = np.zeros((*labels.shape, n_objects + 1), dtype=bool)
+    np.put_along_axis(out, labels[..., None].astype(np.int64), True, axis=-1)
+    return out
+
+
+def onehot_to_label_map(mask: np.ndarray) -> np.ndarray:
+    """One-hot mask -> integer label map (background = number of objects)."""
+    return np.argmax(mask, axis=-1).astype(np.int64)

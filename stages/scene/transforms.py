@@ -1,0 +1,112 @@
+"""Read and write ``transforms.json`` in nerfstudio and Blender forms.
+
+nerfstudio form: shared ``fl_x, fl_y, cx, cy, w, h`` (+ ``k1.. p2``) and
+``frames[].transform_matrix`` (camera to world, OpenGL axes). Blender form:
+``camera_angle_x`` and frames whose ``file_path`` may lack an extension
+(``./images/frame_00012`` with ``.png`` implied). Per-frame intrinsics in
+nerfstudio form override the shared ones.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .camera import DISTORTION_KEYS, Camera
+from .errors import SceneError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG")
+
+
+def load_json(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise SceneError(path, "file not found", "point to a scene folder that holds transforms.json")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise SceneError(path, f"not valid JSON ({exc})", "repair or regenerate the file") from exc
+    if not isinstance(data, dict):
+        raise SceneError(path, "top level is not a JSON object", "regenerate the file")
+    return data
+
+
+def camera_from_dict(d: dict[str, Any], path: Path, where: str, image_hw: tuple[int, int] | None = None) -> Camera:
+    """Intrinsics from a nerfstudio- or Blender-style dictionary."""
+    if "camera_angle_x" in d and "fl_x" not in d:
+        if image_hw is None and not ("w" in d and "h" in d):
+            raise SceneError(path, f"{where}: Blender form without w/h and no image to read the size from",
+                             "add \"w\" and \"h\" or make the first image readable")
+        h, w = (int(d["h"]), int(d["w"])) if "w" in d and "h" in d else image_hw  # type: ignore[misc]
+        return Camera.from_fov(float(d["camera_angle_x"]), w, h)
+    missing = [k for k in ("fl_x", "w", "h") if k not in d]
+    if missing:
+        raise SceneError(path, f"{where}: missing intrinsics {missing}",
+                         "give fl_x, fl_y, cx, cy, w, h (nerfstudio) or camera_angle_x (Blender)")
+    w, h = int(d["w"]), int(d["h"])
+    fx = float(d["fl_x"])
+    fy = float(d.get("fl_y", fx))
+    cx = float(d.get("cx", w / 2.0))
+    cy = float(d.get("cy", h / 2.0))
+    for name, val in (("fl_x", fx), ("fl_y", fy), ("cx", cx), ("cy", cy)):
+        if not np.isfinite(val):
+            raise SceneError(path, f"{where}: {name} is not finite", "re-export the camera intrinsics")
+    if fx <= 0 or fy <= 0 or w <= 0 or h <= 0:
+        raise SceneError(path, f"{where}: focal length and image size must be positive",
+                         "re-export the camera intrinsics")
+    dist = {k: float(d[k]) for k in DISTORTION_KEYS if k in d and float(d[k]) != 0.0}
+    return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=w, height=h, distortion=dist)
+
+
+def camera_to_dict(camera: Camera) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "camera_model": "OPENCV" if camera.has_distortion else "PINHOLE",
+        "fl_x": camera.fx,
+        "fl_y": camera.fy,
+        "cx": camera.cx,
+        "cy": camera.cy,
+        "w": camera.width,
+        "h": camera.height,
+    }
+    for k in DISTORTION_KEYS:
+        if k in camera.distortion:
+            out[k] = camera.distortion[k]
+    return out
+
+
+def parse_pose(value: Any, path: Path, where: str) -> np.ndarray:
+    """A 4x4 rigid camera-to-world matrix, or a SceneError naming the frame."""
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(path, f"{where}: transform_matrix is not numeric", "re-export the poses") from exc
+    if m.shape == (3, 4):
+        m = np.vstack([m, [0, 0, 0, 1]])
+    if m.shape != (4, 4):
+        raise SceneError(path, f"{where}: transform_matrix has shape {m.shape}, expected 4x4",
+                         "write a 4x4 camera-to-world matrix")
+    if not np.isfinite(m).all():
+        raise SceneError(path, f"{where}: transform_matrix has NaN or infinite entries",
+                         "drop the frame or re-run pose estimation")
+    r = m[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-3) or np.linalg.det(r) < 0:
+        raise SceneError(path, f"{where}: transform_matrix rotation is not orthonormal (not a rigid pose)",
+                         "write camera-to-world rotations without scale or shear")
+    if not np.allclose(m[3], [0, 0, 0, 1], atol=1e-6):
+        raise SceneError(path, f"{where}: last row of transform_matrix is {m[3].tolist()}, expected [0, 0, 0, 1]",
+                         "write an affine 4x4 matrix")
+    return m
+
+
+def resolve_image_path(root: Path, file_path: str) -> Path:
+    """The image file a frame names; Blender form may leave out the extension."""
+    p = (root / file_path).resolve() if not Path(file_path).is_absolute() else Path(file_path)
+    if p.suffix in IMAGE_SUFFIXES or p.exists():
+        return p
+    for suffix in IMAGE_SUFFIXES:
+        candidate = p.with_name(p.name + suffix)
+        if candidate.exists():
+            return candidate
+    return p.with_name(p.name + ".png")
