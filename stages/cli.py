@@ -23,7 +23,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "render": ("stages.model.render_cli", "render any pose with any object states from a trained run"),
     "compare": ("stages.model.compare_cli", "train every method for the same wall-clock budget"),
     "evaluate": ("stages.evaluate.cli", "metrics, unseen-state control and grounding for a trained run"),
-    "control": ("stages.evaluate.control_cli", "set object states from language commands"),
+    "language": ("stages.language.cli", "text encoder, language targets and relevancy queries"),
+    "control": ("stages.language.control_cli", "set object states from language commands"),
     "report": ("stages.report.cli", "write the self-contained HTML report"),
     "stability": ("stages.stability.cli", "run the numerical-stability suite and print its table"),
 }
