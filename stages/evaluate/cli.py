@@ -1,0 +1,113 @@
+"""``livescene evaluate``: metrics, unseen-state control and grounding of a trained run.
+
+    livescene evaluate --run RUN --data DS --out DIR [--truth CAPTURE] [--pose-alignment pose_error.json]
+
+Writes DIR/metrics.json (per-image PSNR/SSIM with mean and std, LPIPS or why
+not, render fps, unseen-combination PSNR over the image and the moved objects,
+grounding IoU per query and mIoU) and PNG renders for the report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from stages.scene import InputError
+
+
+def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
+    from stages.language.cli import add_encoder_arguments
+
+    p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--run", required=True, help="trained run folder (stages.model)")
+    p.add_argument("--data", default=None, help="scene dataset (default: the one in the run's config.yaml)")
+    p.add_argument("--truth", default=None, help="synthetic capture folder with truth/ (enables unseen combinations)")
+    p.add_argument("--pose-alignment", default=None,
+                   help="pose_error.json of `livescene poses compare` (needed when the run used COLMAP poses and "
+                        "frames carry no source_index)")
+    p.add_argument("--out", required=True, help="output folder (metrics.json, renders/, unseen/, grounding/)")
+    p.add_argument("--max-views", type=int, default=None, help="held-out views to evaluate (default: all)")
+    p.add_argument("--unseen-views", type=int, default=3, help="held-out poses for unseen combinations")
+    p.add_argument("--levels", default="0,0.5,1", help="levels of the unseen-combination test")
+    p.add_argument("--novelty-min", type=float, default=0.25,
+                   help="least L-inf distance to training states for a combination to count as unseen")
+    p.add_argument("--grounding-threshold", type=float, default=0.5, help="relevancy threshold of the grounding IoU")
+    p.add_argument("--no-grounding", action="store_true", help="skip grounding (no text encoder is loaded)")
+    p.add_argument("--no-renders", action="store_true", help="write metrics.json only")
+    p.add_argument("--device", default="cpu")
+    add_encoder_arguments(p)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return _evaluate(args)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from stages.language.grounding import Grounder
+    from stages.language.model_run import load_model_run, run_dataset_root
+    from stages.language.vocabulary import ObjectVocabulary
+    from stages.scene import read_scene
+
+    from .evaluation import EvaluateConfig, evaluate_run
+    from .truth_source import TruthSource
+
+    data = args.data or run_dataset_root(args.run)
+    if data is None:
+        raise InputError(Path(args.run) / "config.yaml", "does not say which dataset the run was trained on",
+                         "pass --data DS")
+    try:
+        levels = tuple(float(v) for v in args.levels.split(",") if v.strip())
+    except ValueError as exc:
+        raise InputError("--levels", f"{args.levels!r} is not a list of numbers", "write e.g. 0,0.5,1") from exc
+    ds = read_scene(data)
+    truth = None
+    if args.truth:
+        same_world = str(ds.meta.get("units", "")).lower() != "colmap"
+        truth = TruthSource.from_capture(args.truth, args.pose_alignment, same_world=same_world)
+    grounder = None
+    if not args.no_grounding:
+        from stages.language.cli import encoder_from_args
+
+        vocab = ObjectVocabulary.from_prompts(ds.objects, ds.prompts, Path(data) / "prompts.yaml")
+        grounder = Grounder(vocab, encoder_from_args(args))
+    cfg = EvaluateConfig(max_views=args.max_views, unseen_views=args.unseen_views, levels=levels,
+                         novelty_min=args.novelty_min, grounding_threshold=args.grounding_threshold,
+                         save_renders=not args.no_renders)
+    run = load_model_run(args.run, args.device)
+    extra = {"run": str(args.run), "device": args.device,
+             "encoder": getattr(grounder.encoder, "name", None) if grounder else None}
+    metrics = evaluate_run(run, ds, args.out, truth, grounder, cfg, extra)
+    print(json.dumps(headline(metrics), indent=2))
+    return 0
+
+
+def headline(metrics: dict) -> dict:
+    """The numbers a person reads first (the full detail is in metrics.json)."""
+    held = metrics["held_out"]
+    unseen = metrics["unseen_combinations"]
+    ground = metrics["grounding"]
+    out = {"psnr": held["psnr"]["mean"], "psnr_std": held["psnr"]["std"], "ssim": held["ssim"]["mean"],
+           "lpips": held["lpips_status"] if held["lpips"] is None else held["lpips"]["mean"],
+           "fps": held["fps"], "views": held["psnr"]["n"]}
+    if unseen.get("status") == "computed":
+        out |= {"unseen_psnr": unseen["psnr"]["mean"], "unseen_psnr_moved": unseen["psnr_moved"]["mean"],
+                "unseen_n": unseen["n_unseen"]}
+    else:
+        out["unseen"] = unseen.get("status")
+    if ground.get("status") == "computed":
+        for key, value in ground.items():
+            if key.startswith("miou"):
+                out[f"grounding_{key}"] = value
+        out["grounding_per_query"] = {q["query"]: q["probs"]["iou"]["mean"] for q in ground["queries"]}
+    else:
+        out["grounding"] = ground.get("status")
+    return out

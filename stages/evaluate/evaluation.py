@@ -1,0 +1,274 @@
+"""Evaluate a trained run: held-out views, unseen state combinations, grounding -> metrics.json.
+
+The run is anything with the model stage's render API: ``.objects`` and
+``.render(camera, c2w, states, frame_index=None)`` returning numpy ``rgb``
+``[H, W, 3]``, ``probs`` ``[H, W, alpha + 1]`` (background last) and, when
+trained with language targets, ``language`` ``[H, W, D]``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from stages.scene import Frame, InputError, SceneDataset, atomic_dir, write_json
+
+from .metrics import Lpips, iou, psnr, ssim, summarize
+from .truth_source import TruthSource
+from .unseen_states import unseen_combinations
+
+EVALUATE_VERSION = 1
+
+
+@dataclass
+class EvaluateConfig:
+    """What to evaluate and how much of it."""
+
+    max_views: int | None = None
+    """Held-out (split == test) views to evaluate, evenly spaced; None = all."""
+    unseen_views: int = 3
+    """Held-out poses at which unseen state combinations are rendered (needs truth)."""
+    levels: tuple[float, ...] = (0.0, 0.5, 1.0)
+    """Levels each object is set to in the unseen-combination test."""
+    novelty_min: float = 0.25
+    """Least L-infinity distance to every training state vector for a combination to count as unseen."""
+    moved_threshold: float = 0.05
+    """An object 'moved' when its test value differs from the view's own state by more than this."""
+    grounding_threshold: float = 0.5
+    """Relevancy above which a pixel belongs to the queried object."""
+    save_renders: bool = True
+    """Write PNGs (held-out renders, unseen model|truth pairs, grounding maps) for the report."""
+    max_unseen_images: int = 12
+    """How many unseen-combination model|truth pairs are saved as PNG."""
+
+
+def _evenly(items: list, n: int | None) -> list:
+    if n is None or n >= len(items):
+        return list(items)
+    if n <= 0:
+        return []
+    idx = np.linspace(0, len(items) - 1, n).round().astype(int)
+    return [items[i] for i in dict.fromkeys(idx.tolist())]
+
+
+def _to_png(path: Path, rgb: np.ndarray) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img = np.clip(np.asarray(rgb, dtype=np.float64) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    if img.ndim == 3:
+        img = img[..., ::-1]
+    cv2.imwrite(str(path), img)
+
+
+def _finite_or_none(x: float | None) -> float | None:
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+class Evaluator:
+    """Runs the three evaluations of one run on one dataset."""
+
+    def __init__(self, run: Any, dataset: SceneDataset, truth: TruthSource | None = None,
+                 grounder: Any | None = None, config: EvaluateConfig | None = None) -> None:
+        self.run = run
+        self.ds = dataset
+        self.truth = truth
+        self.grounder = grounder
+        self.config = config or EvaluateConfig()
+        run_objects = list(getattr(run, "objects", dataset.objects))
+        if run_objects != list(dataset.objects):
+            raise InputError(dataset.root / "mapping.yaml", f"the run's objects {run_objects} differ from the "
+                             f"dataset's {dataset.objects}", "evaluate a run on the dataset it was trained on")
+
+    # -- rendering ------------------------------------------------------------------------------------------
+    def _render(self, frame: Frame, states: dict[str, float] | None) -> dict[str, np.ndarray]:
+        return self.run.render(self.ds.camera_of(frame), np.asarray(frame.c2w, float), states,
+                               frame_index=self.ds.frames.index(frame))
+
+    # -- 1. held-out views ----------------------------------------------------------------------------------
+    def held_out(self, out_dir: Path | None) -> tuple[dict[str, Any], list[tuple[Frame, dict[str, np.ndarray]]]]:
+        frames = _evenly(self.ds.frames_in("test"), self.config.max_views)
+        if not frames:
+            raise InputError(self.ds.root / "transforms.json", "no held-out frames (split == test)",
+                             "assemble the dataset with a train/test split")
+        lpips = Lpips()
+        records, kept = [], []
+        render_seconds = 0.0
+        for frame in tqdm(frames, desc="held-out views", unit="view"):
+            gt = self.ds.load_image(frame)
+            t0 = time.perf_counter()
+            out = self._render(frame, frame.state)
+            render_seconds += time.perf_counter() - t0
+            rgb = np.asarray(out["rgb"], dtype=np.float64)
+            rec = {"frame": frame.frame_id, "file_path": frame.file_path, "psnr": _finite_or_none(psnr(rgb, gt)),
+                   "ssim": ssim(rgb, gt), "lpips": lpips(rgb, gt) if lpips.available else None,
+                   "state": frame.state}
+            records.append(rec)
+            kept.append((frame, {k: v for k, v in out.items() if k in ("probs", "language")}))
+            if out_dir is not None and self.config.save_renders:
+                _to_png(out_dir / "renders" / f"{frame.frame_id}.png", rgb)
+        cam = self.ds.camera_of(frames[0])
+        summary = {
+            "views": records,
+            "psnr": summarize([r["psnr"] for r in records]),
+            "ssim": summarize([r["ssim"] for r in records]),
+            "lpips": summarize([r["lpips"] for r in records]) if lpips.available else None,
+            "lpips_status": lpips.status,
+            "render_seconds": render_seconds,
+            "fps": len(frames) / render_seconds if render_seconds > 0 else None,
+            "image_size": [cam.width, cam.height],
+            "state_source": "dataset per-frame state" if all(f.state for f in frames)
+            else "run's own (learned) state at the frame index where the dataset has none",
+        }
+        return summary, kept
+
+    # -- 2. unseen state combinations -----------------------------------------------------------------------
+    def unseen(self, out_dir: Path | None) -> dict[str, Any]:
+        if self.truth is None:
+            return {"status": "skipped: no truth capture given (--truth)"}
+        cfg = self.config
+        objects = self.ds.objects
+        train_states = self.ds.state_matrix(self.ds.frames_in("train"))
+        combos = unseen_combinations(len(objects), train_states, cfg.levels, cfg.novelty_min)
+        views = _evenly(self.ds.frames_in("test"), cfg.unseen_views)
+        records = []
+        saved = 0
+        pose_sources = set()
+        for frame in tqdm(views, desc="unseen combinations", unit="view"):
+            cam = self.ds.camera_of(frame)
+            tcam = self.truth.camera_for(cam.width, cam.height)
+            t_c2w, how = self.truth.pose_for(frame)
+            pose_sources.add(how)
+            own_state = self.truth.state_for(frame) or {}
+            own_ids = self.truth.renderer.render(t_c2w, own_state, camera=tcam)["ids"] if own_state else None
+            for ci, combo in enumerate(combos):
+                states = dict(zip(objects, combo.values, strict=True))
+                model_rgb = np.asarray(self._render(frame, states)["rgb"], dtype=np.float64)
+                t = self.truth.renderer.render(t_c2w, states, camera=tcam)
+                truth_rgb = np.asarray(t["rgb"], dtype=np.float64)
+                moved = [o for o in objects if abs(states[o] - own_state.get(o, -1.0)) > cfg.moved_threshold]
+                moved_ids = [self.truth.object_ids[o] for o in moved if o in self.truth.object_ids]
+                region = np.isin(t["ids"], moved_ids)
+                if own_ids is not None:
+                    region |= np.isin(own_ids, moved_ids)  # the swept region: where it was and where it is
+                records.append({
+                    "frame": frame.frame_id, "combination": ci, "states": states, "anchor": objects[combo.anchor],
+                    "level": combo.level, "novelty": _finite_or_none(combo.novelty), "unseen": combo.unseen,
+                    "moved_objects": moved,
+                    "moved_pixels": int(region.sum()),
+                    "psnr": _finite_or_none(psnr(model_rgb, truth_rgb)),
+                    "psnr_moved": _finite_or_none(psnr(model_rgb, truth_rgb, region)),
+                    "ssim": ssim(model_rgb, truth_rgb),
+                })
+                if out_dir is not None and cfg.save_renders and saved < cfg.max_unseen_images:
+                    _to_png(out_dir / "unseen" / f"{frame.frame_id}_c{ci:02d}.png",
+                            np.concatenate([model_rgb, truth_rgb], axis=1))
+                    saved += 1
+        unseen = [r for r in records if r["unseen"]]
+        return {
+            "status": "computed",
+            "truth": self.truth.origin,
+            "truth_pose_source": sorted(pose_sources),
+            "alignment_residual": self.truth.alignment_residual(self.ds.frames),
+            "levels": list(cfg.levels),
+            "novelty_min": cfg.novelty_min,
+            "combinations": [asdict(c) | {"novelty": _finite_or_none(c.novelty)} for c in combos],
+            "records": records,
+            "psnr": summarize([r["psnr"] for r in unseen]),
+            "psnr_moved": summarize([r["psnr_moved"] for r in unseen]),
+            "ssim": summarize([r["ssim"] for r in unseen]),
+            "n_unseen": len(unseen),
+            "n_not_novel": len(records) - len(unseen),
+        }
+
+    # -- 3. grounding ---------------------------------------------------------------------------------------
+    def grounding(self, rendered: list[tuple[Frame, dict[str, np.ndarray]]], out_dir: Path | None) -> dict[str, Any]:
+        if self.grounder is None:
+            return {"status": "skipped: no text encoder"}
+        truth_masks = self._grounding_masks([f for f, _ in rendered])
+        if truth_masks is None:
+            return {"status": "skipped: the dataset has no masks and no truth capture was given"}
+        queries = []
+        for i, entry in enumerate(self.grounder.vocabulary.entries):
+            aliases = entry.aliases
+            queries.append({"query": aliases[0], "object": entry.name, "index": i, "kind": "name"})
+            if len(aliases) > 1:
+                queries.append({"query": aliases[1], "object": entry.name, "index": i, "kind": "synonym"})
+        sources = ["probs"] + (["language"] if rendered and "language" in rendered[0][1] else [])
+        results: dict[str, Any] = {"status": "computed", "threshold": self.config.grounding_threshold,
+                                   "sources": sources, "queries": []}
+        for q in tqdm(queries, desc="grounding queries", unit="query"):
+            entry: dict[str, Any] = dict(q)
+            weights = self.grounder.object_weights(q["query"])
+            entry["object_weights"] = dict(zip(self.ds.objects, map(float, weights), strict=True))
+            for source in sources:
+                ious = []
+                for (frame, out), masks in zip(rendered, truth_masks, strict=True):
+                    truth = masks[..., q["index"]]
+                    if not truth.any():
+                        continue  # the object is not in view: IoU is undefined there
+                    rel = (self.grounder.relevancy_from_probs(out["probs"], q["query"]) if source == "probs"
+                           else self.grounder.relevancy_from_language(out["language"], q["query"]))
+                    ious.append(iou(rel > self.config.grounding_threshold, truth))
+                    if out_dir is not None and self.config.save_renders and len(ious) == 1:
+                        slug = q["query"].replace(" ", "-")
+                        _to_png(out_dir / "grounding" / f"{source}_{slug}_{frame.frame_id}.png", rel)
+                entry[source] = {"iou": summarize(ious), "per_view": ious}
+            results["queries"].append(entry)
+        for source in sources:
+            for kind in ("name", "synonym"):
+                vals = [q[source]["iou"]["mean"] for q in results["queries"] if q["kind"] == kind]
+                results[f"miou_{source}_{kind}"] = summarize([v for v in vals if v is not None])["mean"]
+            results[f"miou_{source}"] = summarize(
+                [q[source]["iou"]["mean"] for q in results["queries"] if q[source]["iou"]["mean"] is not None])["mean"]
+        return results
+
+    def _grounding_masks(self, frames: list[Frame]) -> list[np.ndarray] | None:
+        """Truth object masks ``[H, W, alpha + 1]`` per frame: the dataset's masks, else the truth renderer's ids."""
+        if self.ds.has_masks:
+            return [self.ds.load_mask(f) for f in frames]
+        if self.truth is None:
+            return None
+        out = []
+        for f in frames:
+            cam = self.ds.camera_of(f)
+            ids = self.truth.renderer.render(self.truth.pose_for(f)[0], self.truth.state_for(f) or {},
+                                             camera=self.truth.camera_for(cam.width, cam.height))["ids"]
+            chans = [ids == self.truth.object_ids.get(o, -1) for o in self.ds.objects]
+            chans.append(~np.any(chans, axis=0))
+            out.append(np.stack(chans, axis=-1))
+        return out
+
+    # -- everything -----------------------------------------------------------------------------------------
+    def evaluate(self, out_dir: Path | None = None) -> dict[str, Any]:
+        t0 = time.perf_counter()
+        held, rendered = self.held_out(out_dir)
+        unseen = self.unseen(out_dir)
+        grounding = self.grounding(rendered, out_dir)
+        return {
+            "evaluate_version": EVALUATE_VERSION,
+            "dataset": str(self.ds.root),
+            "objects": self.ds.objects,
+            "config": asdict(self.config),
+            "held_out": held,
+            "unseen_combinations": unseen,
+            "grounding": grounding,
+            "seconds": time.perf_counter() - t0,
+        }
+
+
+def evaluate_run(run: Any, dataset: SceneDataset, out_dir: str | Path, truth: TruthSource | None = None,
+                 grounder: Any | None = None, config: EvaluateConfig | None = None,
+                 extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Evaluate and write ``out_dir`` atomically: metrics.json plus PNG renders. Returns the metrics."""
+    out_dir = Path(out_dir)
+    with atomic_dir(out_dir) as tmp:
+        metrics = Evaluator(run, dataset, truth, grounder, config).evaluate(tmp)
+        if extra:
+            metrics.update(extra)
+        write_json(tmp / "metrics.json", metrics)
+    return metrics

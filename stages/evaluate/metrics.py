@@ -1,0 +1,106 @@
+"""Image and mask metrics: PSNR (whole image or a pixel mask), SSIM, IoU, and LPIPS when it is available.
+
+LPIPS needs pretrained network weights that cannot be downloaded here; it is
+computed only when torchvision and the weights are already on disk, and
+otherwise recorded as not available (never estimated).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+def psnr(pred: np.ndarray, target: np.ndarray, mask: np.ndarray | None = None, data_range: float = 1.0) -> float:
+    """Peak signal-to-noise ratio in dB over all pixels, or over ``mask`` (``[H, W]`` bool) only.
+
+    Returns NaN for an empty mask and +inf for identical images.
+    """
+    pred = np.asarray(pred, dtype=np.float64)
+    target = np.asarray(target, dtype=np.float64)
+    if pred.shape != target.shape:
+        raise ValueError(f"prediction {pred.shape} and target {target.shape} differ in shape")
+    err = (pred - target) ** 2
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if not mask.any():
+            return float("nan")
+        err = err[mask]
+    mse = float(err.mean())
+    if mse == 0.0:
+        return float("inf")
+    return 10.0 * math.log10(data_range**2 / mse)
+
+
+def ssim(pred: np.ndarray, target: np.ndarray, data_range: float = 1.0) -> float:
+    """Structural similarity of two ``[H, W, 3]`` images (scikit-image, Gaussian-free 7x7 window)."""
+    from skimage.metrics import structural_similarity
+
+    pred = np.asarray(pred, dtype=np.float64)
+    target = np.asarray(target, dtype=np.float64)
+    win = min(7, *pred.shape[:2])
+    win -= 1 - win % 2  # the window must be odd
+    return float(structural_similarity(pred, target, data_range=data_range, channel_axis=-1, win_size=win))
+
+
+def iou(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Intersection over union of two boolean masks; NaN when both are empty (undefined)."""
+    pred = np.asarray(pred, dtype=bool)
+    truth = np.asarray(truth, dtype=bool)
+    union = int(np.logical_or(pred, truth).sum())
+    if union == 0:
+        return float("nan")
+    return float(np.logical_and(pred, truth).sum()) / union
+
+
+def summarize(values: list[float]) -> dict[str, float | int | None]:
+    """Mean, std (population), min, max and count of the finite values (None when there are none)."""
+    arr = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=np.float64)
+    if arr.size == 0:
+        return {"mean": None, "std": None, "min": None, "max": None, "n": 0}
+    return {"mean": float(arr.mean()), "std": float(arr.std()), "min": float(arr.min()), "max": float(arr.max()),
+            "n": int(arr.size)}
+
+
+class Lpips:
+    """LPIPS (AlexNet) through torchmetrics, only from weights already on this machine.
+
+    ``available`` says whether it can run; ``status`` says why not. The
+    torchvision AlexNet backbone and the LPIPS linear layers must both be
+    present locally (torch hub cache), since nothing may be downloaded.
+    """
+
+    def __init__(self) -> None:
+        self.available = False
+        self.status = "not available"
+        self._metric = None
+        try:
+            import torchvision  # noqa: F401
+            from torchmetrics.image.lpip import LearnedPerceptualImagePatchSimilarity
+        except ImportError as exc:
+            self.status = f"not available: {exc.name or exc} is not installed (LPIPS needs torchvision and weights)"
+            return
+        hub = Path(os.environ.get("TORCH_HOME", Path.home() / ".cache" / "torch")) / "hub" / "checkpoints"
+        if not any(hub.glob("alexnet-*.pth")):
+            self.status = f"not available: no AlexNet weights in {hub} (and none may be downloaded)"
+            return
+        try:
+            self._metric = LearnedPerceptualImagePatchSimilarity(net_type="alex", normalize=True)
+        except Exception as exc:  # weights missing or corrupt: say so, do not guess a value
+            self.status = f"not available: {type(exc).__name__}: {exc}"
+            return
+        self.available = True
+        self.status = "computed (torchmetrics, AlexNet)"
+
+    def __call__(self, pred: np.ndarray, target: np.ndarray) -> float | None:
+        if not self.available or self._metric is None:
+            return None
+        import torch
+
+        a = torch.from_numpy(np.ascontiguousarray(pred, dtype=np.float32)).permute(2, 0, 1)[None].clamp(0, 1)
+        b = torch.from_numpy(np.ascontiguousarray(target, dtype=np.float32)).permute(2, 0, 1)[None].clamp(0, 1)
+        with torch.no_grad():
+            return float(self._metric(a, b))

@@ -1,0 +1,128 @@
+"""``livescene control``: set object states from a language command, and render the result.
+
+    livescene control --run RUN "open the fridge and half open the drawer" [--out control.png]
+    livescene control --data DS "close everything"                     # parse only, no trained run
+    livescene control --objects fridge,drawer --prompts prompts.yaml "open the refrigerator"
+
+Prints the new state vector as JSON. With --run the result is rendered at a
+dataset frame's pose (default: the first test frame) through the model API.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import yaml
+
+from stages.scene import InputError
+
+from .cli import add_encoder_arguments, encoder_from_args
+
+
+def build_parser(prog: str = "livescene control") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("command", help='e.g. "open the fridge", "close everything", "open the drawer to 30%%"')
+    p.add_argument("--run", default=None, help="trained run folder: render the result through the model")
+    p.add_argument("--data", default=None, help="scene dataset for object names and prompts (default: the run's)")
+    p.add_argument("--objects", default=None, help="comma-separated object names (parse-only use, without a dataset)")
+    p.add_argument("--prompts", default=None, help="prompts.yaml with synonyms/descriptions (with --objects)")
+    p.add_argument("--state", action="append", default=[], metavar="OBJECT=VALUE",
+                   help="starting state of an object (repeatable; default: all closed, or the frame's state)")
+    p.add_argument("--from-frame", action="store_true", help="start from the state of the rendered frame")
+    p.add_argument("--frame", default=None, help="frame id whose pose is rendered (default: first test frame)")
+    p.add_argument("--out", default=None, help="output PNG with --run (default: control.png)")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--no-encoder", action="store_true",
+                   help="resolve objects by name, synonym and spelling only (no text model is loaded)")
+    add_encoder_arguments(p)
+    return p
+
+
+def _parse_states(items: list[str]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError as exc:
+            raise InputError("--state", f"{item!r} is not OBJECT=VALUE", "write e.g. --state fridge=0.5") from exc
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return _control(args)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _control(args: argparse.Namespace) -> int:
+    from .commands import CommandParser
+    from .model_run import run_dataset_root
+    from .vocabulary import ObjectVocabulary
+
+    data = args.data or (run_dataset_root(args.run) if args.run else None)
+    if args.objects:
+        prompts = {}
+        if args.prompts:
+            try:
+                prompts = yaml.safe_load(Path(args.prompts).read_text()) or {}
+            except (OSError, yaml.YAMLError) as exc:
+                raise InputError(args.prompts, f"cannot read prompts ({exc})", "pass a readable prompts.yaml") from exc
+        vocabulary = ObjectVocabulary.from_prompts([o.strip() for o in args.objects.split(",") if o.strip()],
+                                                   prompts, args.prompts or "--objects")
+    elif data is not None:
+        vocabulary = ObjectVocabulary.from_dataset(data)
+    else:
+        raise InputError("--run/--data/--objects", "no object names to control",
+                         "pass --data DS (or a --run whose config.yaml names its dataset), or --objects a,b")
+    encoder = None if args.no_encoder else encoder_from_args(args)
+    parser = CommandParser(vocabulary, encoder)
+
+    ds = frame = None
+    if args.run:
+        from stages.scene import read_scene
+
+        if data is None:
+            raise InputError(Path(args.run) / "config.yaml", "does not say which dataset the run was trained on",
+                             "pass --data DS")
+        ds = read_scene(data)
+        frames = ds.frames_in("test") or ds.frames
+        frame = next((f for f in ds.frames if f.frame_id == args.frame), None) if args.frame else frames[0]
+        if frame is None:
+            raise InputError(Path(data) / "transforms.json", f"no frame with id {args.frame!r}",
+                             "pick a frame id of the dataset")
+    current = dict.fromkeys(vocabulary.objects, 0.0)
+    if args.from_frame and frame is not None and frame.state:
+        current.update({k: v for k, v in frame.state.items() if k in current})
+    current.update(_parse_states(args.state))
+    result = parser.parse(args.command, current)
+    report = result.to_json(vocabulary.objects)
+    report["command"] = args.command
+
+    if args.run:
+        assert ds is not None and frame is not None
+        import cv2
+        import numpy as np
+
+        from stages.scene import atomic_path
+
+        from .model_run import load_model_run
+
+        run = load_model_run(args.run, args.device)
+        out = run.render(ds.camera_of(frame), frame.c2w, result.states, frame_index=ds.frames.index(frame))
+        path = Path(args.out or "control.png")
+        rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)
+        with atomic_path(path, suffix=".png") as tmp:
+            cv2.imwrite(str(tmp), rgb)
+        report["image"] = str(path)
+        report["frame"] = frame.frame_id
+    print(json.dumps(report, indent=2))
+    return 0

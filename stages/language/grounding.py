@@ -1,0 +1,61 @@
+"""Grounding: a text query -> a relevancy map over a rendered view.
+
+Two sources of evidence, after METHOD.md section 7:
+
+- ``probs`` (every run): the query is scored against each object's phrases
+  (name, synonyms, description, state phrases); a softmax over objects with
+  temperature 10 gives weights ``w``; the map is ``sum_i w_i p_i(pixel)`` with
+  ``p`` the model's rendered per-object interaction probability. When the
+  query clearly names one object this is that object's probability, as in the
+  reference, and otherwise it spreads over the plausible objects.
+- ``language`` (runs trained with language targets): LERF relevancy of the
+  rendered embedding of each pixel against the query, with the canonical
+  negatives "object", "things", "stuff", "texture" and temperature 10.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .encoder import TextEncoder
+from .relevancy import CANONICAL_NEGATIVES, TEMPERATURE, lerf_relevancy, object_similarities, softmax
+from .vocabulary import ObjectVocabulary, normalize_phrase
+
+DEFAULT_THRESHOLD = 0.5
+
+
+class Grounder:
+    """Scores queries against one scene's objects and turns rendered outputs into relevancy maps."""
+
+    def __init__(self, vocabulary: ObjectVocabulary, encoder: TextEncoder, temperature: float = TEMPERATURE) -> None:
+        self.vocabulary = vocabulary
+        self.encoder = encoder
+        self.temperature = temperature
+        self._object_vectors = [encoder.encode(self.object_phrases(i)) for i in range(len(vocabulary.entries))]
+        self._negatives = encoder.encode(list(CANONICAL_NEGATIVES))
+
+    def object_phrases(self, index: int) -> list[str]:
+        e = self.vocabulary.entries[index]
+        phrases = [*e.aliases, normalize_phrase(e.description), e.state_phrase(0.0), e.state_phrase(1.0)]
+        return [p for p in dict.fromkeys(phrases) if p]
+
+    def object_weights(self, query: str) -> np.ndarray:
+        """``[alpha]`` softmax over objects (temperature 10) of the query's best cosine to each object's phrases."""
+        q = self.encoder.encode([query])[0]
+        return softmax(object_similarities(q, self._object_vectors), self.temperature)
+
+    def relevancy_from_probs(self, probs: np.ndarray, query: str) -> np.ndarray:
+        """``[H, W]`` map from rendered per-object probabilities ``[H, W, alpha + 1]`` (background last)."""
+        p = np.asarray(probs, dtype=np.float64)
+        alpha = len(self.vocabulary.entries)
+        if p.shape[-1] != alpha + 1:
+            raise ValueError(f"probs has {p.shape[-1]} channels, expected {alpha} objects + background")
+        p = p / np.maximum(p.sum(-1, keepdims=True), 1e-12)
+        return p[..., :alpha] @ self.object_weights(query)
+
+    def relevancy_from_language(self, language: np.ndarray, query: str) -> np.ndarray:
+        """``[H, W]`` LERF relevancy of rendered embeddings ``[H, W, D]`` (renormalised per pixel)."""
+        lang = np.asarray(language, dtype=np.float64)
+        lang = lang / np.maximum(np.linalg.norm(lang, axis=-1, keepdims=True), 1e-12)
+        q = self.encoder.encode([query])[0]
+        return lerf_relevancy(lang, q, self._negatives, self.temperature)

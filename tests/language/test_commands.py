@@ -1,0 +1,126 @@
+"""The command suite: each phrasing sets exactly the expected states or fails with the expected message."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from stages.language import (
+    AmbiguousObjectError,
+    CommandError,
+    CommandParser,
+    ObjectVocabulary,
+    UnknownObjectError,
+    parse_command,
+    split_clauses,
+)
+
+START = {"fridge": 0.2, "upper_cabinet": 0.4, "lower_cabinet": 0.6, "drawer": 0.8}
+
+
+def _expect(**changes: float) -> dict[str, float]:
+    out = dict(START)
+    out.update(changes)
+    return out
+
+
+ALL_CLOSED = dict.fromkeys(START, 0.0)
+ALL_OPEN = dict.fromkeys(START, 1.0)
+
+SUCCEEDS = [
+    ("open the fridge", _expect(fridge=1.0)),
+    ("Open the Refrigerator!", _expect(fridge=1.0)),  # synonym, case, punctuation
+    ("please open the frige", _expect(fridge=1.0)),  # misspelling
+    ("close the drawr", _expect(drawer=0.0)),  # misspelling
+    ("half open the drawer", _expect(drawer=0.5)),
+    ("open the fridge halfway", _expect(fridge=0.5)),
+    ("open the drawer to 30%", _expect(drawer=0.3)),
+    ("set the fridge to 0.25", _expect(fridge=0.25)),
+    ("close the drawer to 20 percent", _expect(drawer=0.2)),
+    ("open the fridge and the drawer", _expect(fridge=1.0, drawer=1.0)),  # verb carried over "and"
+    ("open the fridge, close the drawer", _expect(fridge=1.0, drawer=0.0)),
+    ("close the fridge; then open the wall cupboard", _expect(fridge=0.0, upper_cabinet=1.0)),
+    ("close everything", ALL_CLOSED),
+    ("open all", ALL_OPEN),
+    ("open the fridge and close everything else", {**ALL_CLOSED, "fridge": 1.0}),
+    ("close everything and half open the drawer", {**ALL_CLOSED, "drawer": 0.5}),  # later clauses override
+    ("open the upper cabinet door", _expect(upper_cabinet=1.0)),  # a name inside a longer phrase
+    ("shut the base cupboard", _expect(lower_cabinet=0.0)),  # synonym with another verb
+    ("open the freezer", _expect(fridge=1.0)),  # meaning only: the text encoder decides
+    ("make the kitchen drawer open", _expect(drawer=1.0)),
+    ("slightly open the fridge", _expect(fridge=0.25)),
+    ("open the lower_cabinet fully", _expect(lower_cabinet=1.0)),
+]
+
+FAILS = [
+    ("open the toaster", UnknownObjectError, r'unknown object "toaster".*fridge \(spelling \d\.\d\d, cosine'),
+    ("open it", UnknownObjectError, r'unknown object "it"'),
+    ("open the cabinet", AmbiguousObjectError,
+     r'ambiguous object "cabinet".*(upper_cabinet|lower_cabinet) \(1\.00\).*(lower_cabinet|upper_cabinet) \(1\.00\)'),
+    ("close the cupboard", AmbiguousObjectError, r"ambiguous object \"cupboard\".*lower_cabinet.*upper_cabinet"),
+    ("open the fridge to 130%", CommandError, r"amount 1\.3 .* outside 0\.\.1"),
+    ("the fridge", CommandError, r'no action in "the fridge"'),
+    ("set the drawer", CommandError, r"neither open, closed nor an amount"),
+    ("", CommandError, r"empty command"),
+]
+
+
+@pytest.mark.parametrize(("command", "expected"), SUCCEEDS, ids=[c for c, _ in SUCCEEDS])
+def test_command_sets_exactly_the_expected_states(command, expected, kitchen, encoder):
+    result = CommandParser(kitchen, encoder).parse(command, START)
+    assert result.states == pytest.approx(expected, abs=1e-12)
+    assert set(result.states) == set(START)
+
+
+@pytest.mark.parametrize(("command", "error", "message"), FAILS, ids=[c or "<empty>" for c, _, _ in FAILS])
+def test_command_fails_with_the_expected_message(command, error, message, kitchen, encoder):
+    with pytest.raises(error) as info:
+        CommandParser(kitchen, encoder).parse(command, START)
+    assert re.search(message, str(info.value)), str(info.value)
+    assert "fix:" in str(info.value)
+
+
+def test_suite_is_large_enough():
+    assert len(SUCCEEDS) + len(FAILS) >= 20
+
+
+def test_actions_record_how_each_object_was_found(kitchen, encoder):
+    result = CommandParser(kitchen, encoder).parse("open the refrigerator and close the drawr and the freezer")
+    methods = [(a.object, a.method, a.value) for a in result.actions]
+    assert methods == [("fridge", "exact", 1.0), ("drawer", "fuzzy", 0.0), ("fridge", "embedding", 0.0)]
+    assert result.vector(kitchen.objects) == [0.0, 0.0, 0.0, 0.0]
+
+
+def test_shared_synonym_is_ambiguous_not_guessed():
+    vocab = ObjectVocabulary.from_prompts(["fridge", "cabinet"], {"fridge": {"synonyms": ["door"]},
+                                                                  "cabinet": {"synonyms": ["door"]}})
+    with pytest.raises(AmbiguousObjectError, match=r"fridge \(1\.00\), cabinet \(1\.00\) by exact name"):
+        CommandParser(vocab).parse("open the door")
+
+
+def test_without_encoder_names_and_spelling_still_resolve(kitchen):
+    parser = CommandParser(kitchen)  # no text model loaded
+    assert parser.parse("open the refrigerator and half open the drawr").states == {
+        "fridge": 1.0, "upper_cabinet": 0.0, "lower_cabinet": 0.0, "drawer": 0.5}
+    with pytest.raises(UnknownObjectError, match="no text encoder loaded"):
+        parser.parse("open the freezer")
+
+
+def test_parse_command_one_call_api():
+    result = parse_command("open the chiller to 40%", ["fridge", "drawer"], {"fridge": {"synonyms": ["chiller"]}},
+                           current=[0.0, 1.0])
+    assert result.states == {"fridge": 0.4, "drawer": 1.0}
+    assert result.to_json(["fridge", "drawer"])["vector"] == [0.4, 1.0]
+
+
+def test_current_state_is_checked(kitchen):
+    with pytest.raises(CommandError, match="unknown objects"):
+        CommandParser(kitchen).parse("open the fridge", {"oven": 1.0})
+    with pytest.raises(CommandError, match="3 values for 4 objects"):
+        CommandParser(kitchen).parse("open the fridge", [0.0, 0.0, 0.0])
+
+
+def test_split_clauses():
+    assert split_clauses("Open the fridge, close the drawer and then the cabinet; open all") == [
+        "open the fridge", "close the drawer", "the cabinet", "open all"]
