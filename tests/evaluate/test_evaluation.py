@@ -1,0 +1,139 @@
+"""Evaluation logic on a fake run whose errors are known (see conftest.py)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import ERROR, BagOfWordsEncoder
+
+from stages.evaluate import EvaluateConfig, TruthSource, evaluate_run, read_sim3
+from stages.evaluate import cli as evaluate_cli
+from stages.language import Grounder, ObjectVocabulary
+from stages.scene import Frame, InputError, apply_similarity_to_pose
+
+# error +-0.1 on the fridge's 6 of 16 columns, none elsewhere
+HELD_OUT_PSNR = 10 * math.log10(1 / (ERROR**2 * 6 / 16))
+
+
+def _grounder(ds):
+    return Grounder(ObjectVocabulary.from_prompts(ds.objects, ds.prompts), BagOfWordsEncoder())
+
+
+def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
+    ds, run, truth = eval_scene
+    out = tmp_path / "eval"
+    metrics = evaluate_run(run, ds, out, truth, _grounder(ds), EvaluateConfig(unseen_views=2))
+
+    held = metrics["held_out"]
+    assert [v["frame"] for v in held["views"]] == ["00000", "00002", "00004", "00006"]  # split == test only
+    for v in held["views"]:
+        assert v["psnr"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
+        assert 0 < v["ssim"] < 1
+    assert held["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
+    assert held["psnr"]["std"] == pytest.approx(0.0, abs=1e-9)
+    assert held["fps"] > 0 and held["image_size"] == [16, 12]
+    assert held["lpips"] is None or held["lpips_status"].startswith("computed")
+    # each held-out view was rendered at its own state and frame index
+    assert (0, ds.frames[0].state) in run.rendered
+
+    unseen = metrics["unseen_combinations"]
+    assert unseen["status"] == "computed" and unseen["truth_pose_source"] == ["source_index"]
+    records = unseen["records"]
+    assert {r["frame"] for r in records} == {"00000", "00006"}
+    assert unseen["n_unseen"] > 0
+    for r in records:
+        assert r["states"]["fridge"] != r["states"]["drawer"]  # never together on the training diagonal
+        assert r["psnr"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
+        moved = set(r["moved_objects"])
+        if moved == {"fridge"}:
+            assert r["psnr_moved"] == pytest.approx(20.0, abs=1e-6)
+        elif moved == {"fridge", "drawer"}:
+            assert r["psnr_moved"] == pytest.approx(10 * math.log10(1 / (ERROR**2 / 2)), abs=1e-6)
+        elif moved == {"drawer"}:
+            assert r["psnr_moved"] is None  # no error on the drawer: infinite PSNR is recorded as None
+    assert any(set(r["moved_objects"]) == {"fridge", "drawer"} for r in records)
+
+    ground = metrics["grounding"]
+    assert ground["status"] == "computed" and ground["sources"] == ["probs"]
+    queries = {q["query"]: q for q in ground["queries"]}
+    assert set(queries) == {"fridge", "refrigerator", "drawer", "kitchen drawer"}
+    assert {q["kind"] for q in ground["queries"]} == {"name", "synonym"}
+    for q in queries.values():
+        assert q["probs"]["iou"]["mean"] == pytest.approx(1.0)
+        assert q["probs"]["iou"]["n"] == 4
+    assert ground["miou_probs_name"] == pytest.approx(1.0) and ground["miou_probs_synonym"] == pytest.approx(1.0)
+
+    written = json.loads((out / "metrics.json").read_text())
+    assert written["held_out"]["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
+    assert sorted(p.name for p in (out / "renders").iterdir()) == ["00000.png", "00002.png", "00004.png",
+                                                                    "00006.png"]
+    assert any((out / "unseen").iterdir()) and any((out / "grounding").iterdir())
+
+
+def test_wrong_object_scores_zero_iou(eval_scene, tmp_path):
+    ds, run, _ = eval_scene
+    # swap the synonyms: "refrigerator" now names the drawer, so its map lands on the wrong pixels
+    vocab = ObjectVocabulary.from_prompts(ds.objects, {"drawer": {"synonyms": ["refrigerator"]}})
+    grounder = Grounder(vocab, BagOfWordsEncoder())
+    metrics = evaluate_run(run, ds, tmp_path / "e", None, grounder, EvaluateConfig(save_renders=False))
+    q = {q["query"]: q for q in metrics["grounding"]["queries"]}
+    assert q["refrigerator"]["object"] == "drawer"
+    assert q["fridge"]["probs"]["iou"]["mean"] == pytest.approx(1.0)
+    assert metrics["unseen_combinations"]["status"].startswith("skipped")
+    assert not (tmp_path / "e" / "renders").exists()
+
+
+def test_run_with_other_objects_is_refused(eval_scene, tmp_path):
+    ds, run, _ = eval_scene
+    run.objects = ["drawer", "fridge"]
+    with pytest.raises(InputError, match="differ from the dataset's"):
+        evaluate_run(run, ds, tmp_path / "e")
+    assert not (tmp_path / "e").exists()
+
+
+def test_truth_pose_through_the_similarity(tmp_path, eval_scene):
+    ds, _, truth = eval_scene
+    angle = 0.3
+    sim3 = np.eye(4)
+    sim3[:3, :3] = 2.5 * np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    sim3[:3, 3] = [1.0, -2.0, 0.5]
+    true_c2w = ds.frames[3].c2w
+    colmap_frame = Frame(file_path="images/frame_00099.png", c2w=apply_similarity_to_pose(sim3, true_c2w))
+    aligned = TruthSource(renderer=truth.renderer, camera=truth.camera, object_ids=truth.object_ids,
+                          poses=truth.poses, sim3=sim3, same_world=False)
+    pose, how = aligned.pose_for(colmap_frame)
+    assert how == "sim3"
+    np.testing.assert_allclose(pose, true_c2w, atol=1e-9)
+    moved = [Frame(file_path=f.file_path, c2w=apply_similarity_to_pose(sim3, f.c2w), source_index=f.source_index)
+             for f in ds.frames]
+    assert aligned.alignment_residual(moved)["mean_centre_error"] == pytest.approx(0.0, abs=1e-9)
+    unaligned = TruthSource(renderer=truth.renderer, camera=truth.camera, object_ids={}, same_world=False)
+    with pytest.raises(InputError, match="--pose-alignment"):
+        unaligned.pose_for(colmap_frame)
+
+    path = tmp_path / "pose_error.json"
+    path.write_text(json.dumps({"sim3": sim3.tolist()}))
+    np.testing.assert_allclose(read_sim3(path), sim3)
+    path.write_text(json.dumps({"sim3": np.zeros((4, 4)).tolist()}))
+    with pytest.raises(InputError, match="invertible"):
+        read_sim3(path)
+
+
+def test_truth_camera_follows_downscaled_datasets(eval_scene):
+    _, _, truth = eval_scene
+    big = TruthSource(renderer=truth.renderer, camera=truth.camera.scaled(2.0), object_ids={})
+    cam = big.camera_for(16, 12)
+    assert (cam.width, cam.height, cam.fx) == (16, 12, 20.0)
+    with pytest.raises(InputError, match="not one scale factor"):
+        big.camera_for(16, 10)
+
+
+def test_cli_reports_missing_run_cleanly(tmp_path, capsys, eval_scene):
+    ds, _, _ = eval_scene
+    code = evaluate_cli.main(["--run", str(tmp_path / "no-run"), "--data", str(ds.root), "--out",
+                              str(tmp_path / "e"), "--no-grounding"])
+    assert code == 2
+    assert "run folder not found" in capsys.readouterr().err

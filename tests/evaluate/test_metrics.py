@@ -1,0 +1,91 @@
+"""Metric functions against hand-computed values."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from stages.evaluate import Lpips, iou, novelty, psnr, ssim, summarize, unseen_combinations
+
+
+def test_psnr_of_known_noise():
+    rng = np.random.default_rng(0)
+    target = rng.uniform(0.2, 0.8, (10, 12, 3))
+    noise = 0.05 * rng.choice([-1.0, 1.0], target.shape)  # |error| = 0.05 everywhere: MSE = 0.0025
+    assert psnr(target + noise, target) == pytest.approx(10 * math.log10(1 / 0.0025), abs=1e-9)  # 26.0206 dB
+    assert psnr(target + noise, target, data_range=2.0) == pytest.approx(10 * math.log10(4 / 0.0025), abs=1e-9)
+    assert psnr(target, target) == math.inf
+
+
+def test_psnr_over_a_mask():
+    target = np.zeros((4, 4, 3))
+    pred = target.copy()
+    pred[:2] = 0.1  # error only in the top half
+    top = np.zeros((4, 4), bool)
+    top[:2] = True
+    assert psnr(pred, target, top) == pytest.approx(20.0)
+    assert psnr(pred, target) == pytest.approx(10 * math.log10(1 / 0.005))
+    assert math.isinf(psnr(pred, target, ~top))
+    assert math.isnan(psnr(pred, target, np.zeros((4, 4), bool)))
+    with pytest.raises(ValueError, match="differ in shape"):
+        psnr(pred, target[:3])
+
+
+def test_ssim_identity_and_ordering():
+    rng = np.random.default_rng(1)
+    img = rng.uniform(0, 1, (16, 16, 3))
+    assert ssim(img, img) == pytest.approx(1.0)
+    slight = np.clip(img + rng.normal(0, 0.02, img.shape), 0, 1)
+    heavy = np.clip(img + rng.normal(0, 0.3, img.shape), 0, 1)
+    assert 1.0 > ssim(slight, img) > ssim(heavy, img)
+    assert np.isfinite(ssim(img[:5, :5], img[:5, :5] * 0.9))  # smaller than the 7x7 window
+
+
+def test_iou_hand_computed():
+    a = np.zeros((4, 5), bool)
+    b = np.zeros((4, 5), bool)
+    a[0, :4] = True  # 4 pixels
+    b[0, 2:] = True  # 3 pixels, 2 shared -> union 5
+    assert iou(a, b) == pytest.approx(2 / 5)
+    assert iou(a, a) == 1.0
+    assert iou(a, ~a) == 0.0
+    assert math.isnan(iou(np.zeros((2, 2), bool), np.zeros((2, 2), bool)))
+
+
+def test_summarize_ignores_undefined_values():
+    s = summarize([1.0, 3.0, float("nan"), None, float("inf")])
+    assert s == {"mean": 2.0, "std": 1.0, "min": 1.0, "max": 3.0, "n": 2}
+    assert summarize([])["mean"] is None
+
+
+def test_lpips_reports_status_not_a_made_up_value():
+    metric = Lpips()
+    if not metric.available:
+        assert metric.status.startswith("not available")
+        assert metric(np.zeros((8, 8, 3)), np.zeros((8, 8, 3))) is None
+    else:
+        assert metric(np.zeros((64, 64, 3)), np.zeros((64, 64, 3))) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_unseen_combinations_are_far_from_training():
+    train = np.array([[t, t] for t in np.linspace(0, 1, 11)])  # the two objects always moved together
+    combos = unseen_combinations(2, train, levels=(0.0, 0.5, 1.0), novelty_min=0.25)
+    values = [c.values for c in combos]
+    assert (0.0, 1.0) in values and (1.0, 0.0) in values
+    for c in combos:
+        assert c.values[c.anchor] == c.level
+        other = c.values[1 - c.anchor]
+        assert other != c.level  # the others are at other values
+        assert c.novelty == pytest.approx(novelty(np.array(c.values), train))
+        assert c.unseen == (c.novelty >= 0.25)
+    assert len(values) == len(set(values))
+    by_key = {c.values: c for c in combos}
+    assert by_key[(0.0, 1.0)].novelty == pytest.approx(0.5)  # nearest diagonal point is (0.5, 0.5)
+    assert novelty(np.array([0.3, 0.3]), np.empty((0, 2))) == math.inf
+
+
+def test_unseen_combinations_scale_to_many_objects():
+    combos = unseen_combinations(10, np.zeros((5, 10)), levels=(0.0, 1.0))
+    assert len(combos) == 20 and all(c.unseen for c in combos)

@@ -1,0 +1,37 @@
+"""Relevancy maps from rendered per-object probabilities and from rendered embeddings."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stages.language import Grounder
+
+
+def _probs(h: int = 6, w: int = 9, n: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    labels = np.zeros((h, w), dtype=int)
+    labels[:, 3:6] = 1
+    labels[:, 6:] = 4  # background is the last channel
+    labels[0, :] = 3
+    probs = np.eye(n + 1)[labels] * 0.9 + 0.1 / (n + 1)
+    return probs, labels
+
+
+def test_query_selects_its_object_channel(kitchen, encoder):
+    grounder = Grounder(kitchen, encoder)
+    probs, labels = _probs()
+    for query, index in [("fridge", 0), ("refrigerator", 0), ("wall cupboard", 1), ("kitchen drawer", 3)]:
+        weights = grounder.object_weights(query)
+        assert weights.argmax() == index and weights.sum() == np.float64(weights.sum())
+        assert abs(weights.sum() - 1) < 1e-9
+        rel = grounder.relevancy_from_probs(probs, query)
+        assert rel.shape == labels.shape
+        np.testing.assert_array_equal(rel > 0.5, labels == index)
+
+
+def test_language_relevancy_prefers_pixels_that_carry_the_query(kitchen, encoder):
+    grounder = Grounder(kitchen, encoder)
+    fridge, background = encoder.encode(["open fridge", "background"])
+    lang = np.stack([np.tile(fridge, (2, 3, 1)), np.tile(background, (2, 3, 1))]) * 3.0  # unnormalised on purpose
+    rel = grounder.relevancy_from_language(lang, "fridge")
+    assert rel.shape == (2, 2, 3)
+    assert rel[0].min() > 0.5 > rel[1].max()
