@@ -1,0 +1,84 @@
+"""`livescene control` and `livescene language query/relevancy` on a fake run (no training needed)."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+
+from stages.language import cli as language_cli
+from stages.language import control_cli
+from stages.language import model_run as model_run_module
+
+
+class _FakeRun:
+    """The model API; the image's grey level is the first object's state so the render shows the command."""
+
+    def __init__(self, objects):
+        self.objects = objects
+        self.calls = []
+
+    def render(self, camera, c2w, states, frame_index=None):
+        self.calls.append((frame_index, dict(states)))
+        h, w = camera.height, camera.width
+        probs = np.zeros((h, w, len(self.objects) + 1), np.float32)
+        probs[:, : w // 2, 0] = 1.0
+        probs[:, w // 2 :, -1] = 1.0
+        return {"rgb": np.full((h, w, 3), states[self.objects[0]], np.float32), "probs": probs}
+
+
+def test_control_parse_only_without_encoder(capsys):
+    code = control_cli.main(["--objects", "fridge,drawer", "--no-encoder", "--state", "drawer=0.4",
+                             "open the fridge to 30% and close the drawr"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["states"] == {"fridge": 0.3, "drawer": 0.0} and out["vector"] == [0.3, 0.0]
+    assert [a["method"] for a in out["actions"]] == ["exact", "fuzzy"]
+
+
+def test_control_errors_exit_2_with_candidates(capsys):
+    assert control_cli.main(["--objects", "fridge,drawer", "--no-encoder", "open the oven"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "unknown object \"oven\"" in err and "fridge (spelling" in err
+    assert control_cli.main(["--objects", "fridge", "--no-encoder", "--state", "fridge", "open all"]) == 2
+    assert "OBJECT=VALUE" in capsys.readouterr().err
+    assert control_cli.main(["--no-encoder", "open all"]) == 2
+    assert "no object names" in capsys.readouterr().err
+
+
+def test_control_with_a_run_renders_the_result(tiny_dataset, tmp_path, monkeypatch, capsys, encoder):
+    fake = _FakeRun(tiny_dataset.objects)
+    monkeypatch.setattr(model_run_module, "load_model_run", lambda run, device="cpu": fake)
+    monkeypatch.setattr(control_cli, "encoder_from_args", lambda args: encoder)
+    (tmp_path / "run").mkdir()
+    out_png = tmp_path / "result.png"
+    code = control_cli.main(["--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root), "--out", str(out_png),
+                             "half open thing zero"])  # "thing zero" is object0's synonym in the fixture
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["states"]["object0"] == 0.5 and report["frame"] == "00000"  # first test frame
+    assert fake.calls == [(0, report["states"])]
+    img = cv2.imread(str(out_png))
+    assert img.shape == (12, 16, 3) and int(img[0, 0, 0]) == 128
+
+
+def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsys, encoder):
+    monkeypatch.setattr(language_cli, "encoder_from_args", lambda args: encoder)
+    assert language_cli.main(["query", "--data", str(tiny_dataset.root), "thing zero"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["resolved"] == {"object": "object0", "method": "exact", "score": 1.0}
+    assert set(out["embedding"]) == set(tiny_dataset.objects)
+
+    monkeypatch.setattr(model_run_module, "load_model_run", lambda run, device="cpu": _FakeRun(tiny_dataset.objects))
+    (tmp_path / "run").mkdir()
+    png = tmp_path / "map.png"
+    assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
+                              "--out", str(png), "thing zero"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    rel = cv2.imread(str(png), cv2.IMREAD_GRAYSCALE)
+    assert info["fraction_above_0.5"] == 0.5
+    assert rel[:, :8].min() > 127 > rel[:, 8:].max()
+    assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
+                              "--out", str(png), "--source", "language", "thing zero"]) == 2
+    assert "renders no language embedding" in capsys.readouterr().err
