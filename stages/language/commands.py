@@ -7,7 +7,8 @@ Beyond the reference's ``open X`` / ``close X`` this accepts:
 - several commands joined by "and", "then", "," or ";" ("open the fridge and close the drawer"),
   where a clause without a verb repeats the previous one ("open the fridge and the drawer");
 - every object at once: "close everything", "open all", and "everything else"/"all other" for the
-  objects the rest of the command does not name.
+  objects the rest of the command does not name;
+- groups: "open all cabinets", "close both cupboards" (every object whose name or synonym has the word).
 
 State values are openness in [0, 1] (0 closed, 1 fully open), so "close X to 20%" leaves it 20% open.
 Later clauses override earlier ones. Parsing needs no trained run: a vocabulary (names, synonyms,
@@ -21,7 +22,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from .encoder import TextEncoder
-from .object_resolution import CommandError, ObjectResolver, ResolverConfig
+from .object_resolution import CommandError, ObjectResolver, ResolverConfig, UnknownObjectError
 from .vocabulary import ObjectVocabulary, normalize_phrase
 
 _SPLIT = re.compile(r"\s*(?:,|;|\band\b|\bthen\b|\balso\b)\s*")
@@ -36,8 +37,12 @@ OPEN_VERBS = {"open": 1.0, "opened": 1.0}
 CLOSE_VERBS = {"close": 0.0, "closed": 0.0, "shut": 0.0}
 NEUTRAL_VERBS = {"set", "put", "move", "make", "turn", "leave", "adjust"}
 FILLERS = {"please", "the", "a", "an", "my", "that", "this", "can", "you", "could", "would", "now", "up", "kindly"}
-EVERYTHING = {"everything", "all", "all objects", "all the objects", "every object", "all of them", "all doors",
-              "all the doors", "each object", "everything in the room", "it all", "them all", "objects"}
+EVERYTHING = {"everything", "all", "all objects", "all the objects", "every object", "all of them", "each object",
+              "everything in the room", "it all", "them all", "objects", "both", "both of them"}
+GROUP_WORDS = ("all", "every", "each", "both")
+"""A phrase "all cabinets" / "both cabinets" names every object whose name or synonym has the word "cabinet"."""
+GENERIC_GROUPS = {"door", "doors", "thing", "things", "part", "parts", "object", "objects"}
+"""Group words that name every object when no name contains them ("close all doors")."""
 EVERYTHING_ELSE = {"everything else", "all else", "all other", "all others", "all other objects", "the rest",
                    "rest", "all the others", "the others", "others", "anything else"}
 SLIGHT_AMOUNT = 0.25
@@ -177,6 +182,10 @@ class CommandParser:
         for i, clause in enumerate(parsed):
             if clause.object_phrase in EVERYTHING or clause.object_phrase in EVERYTHING_ELSE:
                 continue
+            group = self._group(clause.object_phrase, command)
+            if group is not None:
+                named[i] = group
+                continue
             r = self.resolver.resolve(clause.object_phrase, command)
             named[i] = [(r.object, r.method, r.score)]
         mentioned = {o for items in named.values() for o, _, _ in items}
@@ -193,6 +202,22 @@ class CommandParser:
                 states[obj] = float(clause.value)
                 actions.append(Action(obj, float(clause.value), clause.text, method, float(score)))
         return CommandResult(states=states, actions=actions)
+
+    def _group(self, phrase: str, command: str) -> list[tuple[str, str, float]] | None:
+        """Objects named by "all X" / "both X" (X singular or plural), or None when the phrase is no group."""
+        words = phrase.split()
+        if len(words) < 2 or words[0] not in GROUP_WORDS:
+            return None
+        rest = " ".join(words[1:])
+        singular = " ".join(w[:-1] if w.endswith("s") and len(w) > 3 else w for w in words[1:])
+        members = [e.name for e in self.vocabulary.entries
+                   if any(f" {form} " in f" {a} " for a in e.aliases for form in (rest, singular))]
+        if members:
+            return [(o, "group", 1.0) for o in members]
+        if rest in GENERIC_GROUPS or singular in GENERIC_GROUPS:
+            return [(o, "everything", 1.0) for o in self.objects]
+        raise UnknownObjectError(self.vocabulary.source, f'no object of the group "{phrase}" in "{command}"',
+                                 f"name objects of {self.objects} (or say everything)")
 
     def _initial(self, current: Mapping[str, float] | Sequence[float] | None) -> dict[str, float]:
         if current is None:

@@ -51,6 +51,9 @@ SUCCEEDS = [
     ("make the kitchen drawer open", _expect(drawer=1.0)),
     ("slightly open the fridge", _expect(fridge=0.25)),
     ("open the lower_cabinet fully", _expect(lower_cabinet=1.0)),
+    ("open all cabinets", _expect(upper_cabinet=1.0, lower_cabinet=1.0)),  # a group by a shared word
+    ("close both cupboards and open the fridge", _expect(upper_cabinet=0.0, lower_cabinet=0.0, fridge=1.0)),
+    ("close all the doors", ALL_CLOSED),  # no name has "door": every object
 ]
 
 FAILS = [
@@ -63,6 +66,7 @@ FAILS = [
     ("the fridge", CommandError, r'no action in "the fridge"'),
     ("set the drawer", CommandError, r"neither open, closed nor an amount"),
     ("", CommandError, r"empty command"),
+    ("open all ovens", UnknownObjectError, r'no object of the group "all ovens"'),
 ]
 
 
