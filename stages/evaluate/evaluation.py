@@ -98,10 +98,12 @@ class Evaluator:
         lpips = Lpips()
         records, kept = [], []
         render_seconds = 0.0
+        # a learned-state run renders a held-out frame at the state it learned for that frame index (METHOD.md 6)
+        learned = getattr(self.run, "state_mode", "given") == "learned"
         for frame in tqdm(frames, desc="held-out views", unit="view"):
             gt = self.ds.load_image(frame)
             t0 = time.perf_counter()
-            out = self._render(frame, frame.state)
+            out = self._render(frame, None if learned else frame.state)
             render_seconds += time.perf_counter() - t0
             rgb = np.asarray(out["rgb"], dtype=np.float64)
             rec = {"frame": frame.frame_id, "file_path": frame.file_path, "psnr": _finite_or_none(psnr(rgb, gt)),
@@ -121,8 +123,9 @@ class Evaluator:
             "render_seconds": render_seconds,
             "fps": len(frames) / render_seconds if render_seconds > 0 else None,
             "image_size": [cam.width, cam.height],
-            "state_source": "dataset per-frame state" if all(f.state for f in frames)
-            else "run's own (learned) state at the frame index where the dataset has none",
+            "state_source": "run's learned state at the frame index" if learned
+            else "dataset per-frame state" if all(f.state for f in frames)
+            else "dataset per-frame state; the run's own state at the frame index where the dataset has none",
         }
         return summary, kept
 
@@ -198,9 +201,18 @@ class Evaluator:
             queries.append({"query": aliases[0], "object": entry.name, "index": i, "kind": "name"})
             if len(aliases) > 1:
                 queries.append({"query": aliases[1], "object": entry.name, "index": i, "kind": "synonym"})
-        sources = ["probs"] + (["language"] if rendered and "language" in rendered[0][1] else [])
+        sources = ["probs"]
+        language_note = "the run renders no language embedding"
+        if rendered and "language" in rendered[0][1]:
+            run_space = getattr(self.run, "language_encoder", None)
+            if run_space in (None, self.grounder.encoder.name):
+                sources.append("language")
+                language_note = "computed"
+            else:  # queries must live in the embedding space the table was trained in
+                language_note = (f"skipped: run trained with encoder {run_space!r}, "
+                                 f"queries use {self.grounder.encoder.name!r}")
         results: dict[str, Any] = {"status": "computed", "threshold": self.config.grounding_threshold,
-                                   "sources": sources, "queries": []}
+                                   "sources": sources, "language_source": language_note, "queries": []}
         for q in tqdm(queries, desc="grounding queries", unit="query"):
             entry: dict[str, Any] = dict(q)
             weights = self.grounder.object_weights(q["query"])

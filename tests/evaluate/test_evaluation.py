@@ -137,3 +137,33 @@ def test_cli_reports_missing_run_cleanly(tmp_path, capsys, eval_scene):
                               str(tmp_path / "e"), "--no-grounding"])
     assert code == 2
     assert "run folder not found" in capsys.readouterr().err
+
+
+class _LanguageRun:
+    """Wraps the fake run and adds a rendered language embedding: the object's name embedding per pixel."""
+
+    def __init__(self, run, encoder, space):
+        self.inner, self.objects, self.language_encoder = run, run.objects, space
+        self.table = encoder.encode(["fridge", "drawer", "background"])
+
+    def render(self, camera, c2w, states, frame_index=None):
+        out = self.inner.render(camera, c2w, states, frame_index)
+        out["language"] = self.table[out["probs"].argmax(-1)]
+        return out
+
+
+def test_grounding_from_rendered_language_only_in_the_same_space(eval_scene, tmp_path):
+    ds, run, _ = eval_scene
+    grounder = _grounder(ds)
+    same = _LanguageRun(run, grounder.encoder, grounder.encoder.name)
+    metrics = evaluate_run(same, ds, tmp_path / "a", None, grounder, EvaluateConfig(save_renders=False))
+    ground = metrics["grounding"]
+    assert ground["sources"] == ["probs", "language"]
+    q = {q["query"]: q for q in ground["queries"]}
+    assert q["fridge"]["language"]["iou"]["mean"] == pytest.approx(1.0)  # pixels carrying "fridge" exactly
+    assert 0.0 <= ground["miou_language"] <= 1.0
+
+    other = _LanguageRun(run, grounder.encoder, "some other model")
+    metrics = evaluate_run(other, ds, tmp_path / "b", None, grounder, EvaluateConfig(save_renders=False))
+    assert metrics["grounding"]["sources"] == ["probs"]
+    assert metrics["grounding"]["language_source"].startswith("skipped: run trained with encoder")
