@@ -1,0 +1,350 @@
+"""Every hyperparameter of the model stage, as nested dataclasses built from a preset YAML.
+
+A preset (``config/model/<name>.yaml``) gives any subset of the fields below;
+``--set section.field=value`` overrides one field from the command line. The
+defaults are the reference settings of METHOD.md; where the paper and the
+authors' code disagree, the field's docstring says which one the default follows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from stages.scene import InputError
+
+PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "model"
+
+
+@dataclass
+class RadianceFieldConfig:
+    """The main 4D K-Planes field over (x, y, z, k)."""
+
+    base_resolution: int = 128
+    """Spatial plane resolution at scale x1 (cells per axis over the [-1, 1] box)."""
+    k_resolution: int = 32
+    """Resolution of the k (interaction variable) axis of the xk, yk, zk planes."""
+    scales: list[int] = dataclasses.field(default_factory=lambda: [1, 2, 4])
+    """Spatial multipliers of the multi-scale planes (features concatenated over scales)."""
+    channels: int = 32
+    """Feature channels per plane and scale."""
+    init_range: list[float] = dataclasses.field(default_factory=lambda: [0.1, 0.5])
+    """Uniform init of the spatial planes (k planes start at 1, the product's identity)."""
+    geo_feat_dim: int = 15
+    """Geometry features passed from the density MLP to the colour MLP."""
+    hidden: int = 64
+    """Width of the density MLP's single hidden layer."""
+    color_hidden: int = 64
+    """Width of the colour MLP's hidden layers."""
+    color_layers: int = 2
+    """Hidden layers of the colour MLP (16 SH + 15 features -> 64 -> 64 -> 3)."""
+    sh_degree: int = 4
+    """Spherical-harmonics degree of the view-direction encoding (4 -> 16 components)."""
+    density_bias: float = -1.0
+    """density = exp(raw + density_bias); the reference uses exp(raw - 1)."""
+    density_exp_clamp: float = 15.0
+    """Clamp of the exponent (truncated exp) so densities stay finite in float32 and bf16."""
+
+
+@dataclass
+class ProposalConfig:
+    """The proposal density fields (one per proposal level)."""
+
+    resolutions: list[list[int]] = dataclasses.field(default_factory=lambda: [[64, 32], [128, 32]])
+    """Per level: [spatial resolution, k resolution] (reference [64,64,64,32] and [128,128,128,32])."""
+    channels: int = 8
+    """Feature channels of each proposal K-Planes grid."""
+    hidden: int = 64
+    """Width of the one hidden layer of the proposal density MLP."""
+    init_range: list[float] = dataclasses.field(default_factory=lambda: [0.1, 0.15])
+    """Uniform init of proposal spatial planes (reference code's 0.1..0.15)."""
+
+
+@dataclass
+class ProbabilityConfig:
+    """The interaction probability field (tri-plane + MLP -> alpha + 1 logits), shared by all levels."""
+
+    resolution: int = 128
+    """Tri-plane resolution (reference code: 128 on the last proposal level's language grid)."""
+    channels: int = 8
+    """Tri-plane channels (planes multiplied, then sigmoid)."""
+    hidden: int = 64
+    """Width of the decoder's single hidden layer."""
+    init_range: list[float] = dataclasses.field(default_factory=lambda: [0.1, 0.15])
+    """Uniform init of the tri-planes (reference code's 0.1..0.15)."""
+    rejection_threshold: float = 0.0
+    """Samples whose best object probability is below this get k = static_value (reference ships 0 = off)."""
+    static_value: float = 0.0
+    """The 4th coordinate of rejected samples (reference code: 0)."""
+
+
+@dataclass
+class SamplingConfig:
+    """Proposal sampling with the k-projection at every level (METHOD.md section 4)."""
+
+    num_proposal_samples: list[int] = dataclasses.field(default_factory=lambda: [256, 128])
+    """Samples per ray at each proposal level (reference 256, 128)."""
+    num_samples: int = 48
+    """Samples per ray of the final level (reference code 48; the paper says 64)."""
+    single_jitter: bool = False
+    """Use one jitter per ray instead of one per sample."""
+    anneal_slope: float = 10.0
+    """Slope of the proposal-weight annealing exponent (Mip-NeRF 360 eq. 18)."""
+    anneal_max_steps: int = 1000
+    """Steps over which the annealing exponent rises from 0 to 1."""
+    update_every: int = 5
+    """After the warm-up the proposal nets get gradients every this many steps."""
+    update_warmup: int = 5000
+    """Steps over which the update interval ramps from 1 to update_every."""
+    near_plane: float = 0.05
+    """Nearest sample distance, in normalised scene units."""
+    background: list[float] = dataclasses.field(default_factory=lambda: [1.0, 1.0, 1.0])
+    """Colour behind the last sample (reference: white)."""
+    histogram_padding: float = 0.01
+    """Added to the weights before PDF sampling so no interval has zero probability."""
+
+
+@dataclass
+class StateConfig:
+    """Given or learned object states (METHOD.md section 6)."""
+
+    mode: str = "given"
+    """'given' (dense states from the dataset) or 'learned' (key frames supervise a state network)."""
+    grid_resolution: int = 256
+    """Cells of the 1D grid over normalised frame index (257 vertices, as the reference)."""
+    grid_channels: int = 4
+    """Channels of the 1D state grid (= input width of the state MLP)."""
+    hidden: int = 32
+    """Hidden width of the state MLP (METHOD.md: 4 -> 32 -> alpha; the reference code's field default is 64)."""
+    positional_encoding: bool = True
+    """Add the small sinusoidal encoding of the frame index to the grid features (reference: on)."""
+    grid_init: list[float] = dataclasses.field(default_factory=lambda: [0.0, 1.0])
+    """Uniform init of the 1D grid (reference 0..1)."""
+    key_frame_every: int = 0
+    """0: supervise with key_frame_value.yaml; N > 0: use the dataset's own states of every N-th frame instead."""
+
+
+@dataclass
+class LanguageConfig:
+    """The interaction-aware language table (METHOD.md section 7); active with --language-targets."""
+
+    buckets: int = 0
+    """State buckets per object in the table; 0 = as many as the targets file has levels."""
+    interpolate_by: str = "kappa"
+    """'kappa' (paper: interpolate by the object's state) or 'frame' (reference code: by frame index)."""
+    huber_delta: float = 1.25
+    """Delta of the Huber loss on rendered embeddings."""
+
+
+@dataclass
+class LossWeights:
+    """Loss weights (METHOD.md section 5, the reference values)."""
+
+    rgb: float = 1.0
+    """Photometric MSE."""
+    interlevel: float = 1.0
+    """Proposal interlevel loss."""
+    distortion: float = 0.001
+    """Mip-NeRF 360 distortion loss on the final weights."""
+    plane_tv: float = 0.1
+    """Total variation of the main field's planes."""
+    plane_tv_proposal: float = 1e-4
+    """Total variation of the proposal fields' planes."""
+    plane_tv_probability: float = 1e-4
+    """Total variation of the probability field's tri-planes."""
+    l1_k_planes: float = 1e-3
+    """L1 of the main field's k planes to 1."""
+    l1_k_planes_proposal: float = 1e-4
+    """L1 of the proposal fields' k planes to 1."""
+    k_smoothness: float = 0.1
+    """Second-difference smoothness along k, main field."""
+    k_smoothness_proposal: float = 1e-3
+    """Second-difference smoothness along k, proposal fields."""
+    focal_mask: float = 1e-3
+    """Focal cross-entropy of rendered logits against mask labels, every level."""
+    repulsion: float = 1e-3
+    """Repulsion of rendered logits of ray pairs with different labels."""
+    repulsion_margin: float = 10.0
+    """K of ELU(K - dist) + 1."""
+    language: float = 0.1
+    """Huber loss of the rendered language embedding."""
+    state_mse: float = 1e-3
+    """MSE of learned states against key frames (learned-state mode only)."""
+
+
+@dataclass
+class ModelConfig:
+    """What the method is made of."""
+
+    field: RadianceFieldConfig = dataclasses.field(default_factory=RadianceFieldConfig)
+    """Main radiance field."""
+    proposal: ProposalConfig = dataclasses.field(default_factory=ProposalConfig)
+    """Proposal density fields."""
+    probability: ProbabilityConfig = dataclasses.field(default_factory=ProbabilityConfig)
+    """Interaction probability field."""
+    sampling: SamplingConfig = dataclasses.field(default_factory=SamplingConfig)
+    """Ray sampling."""
+    state: StateConfig = dataclasses.field(default_factory=StateConfig)
+    """State source."""
+    language: LanguageConfig = dataclasses.field(default_factory=LanguageConfig)
+    """Language table."""
+    losses: LossWeights = dataclasses.field(default_factory=LossWeights)
+    """Loss weights."""
+
+
+@dataclass
+class TrainConfig:
+    """How training runs."""
+
+    max_steps: int = 80000
+    """Optimisation steps (paper: 80k OmniSim, 100k InterReal)."""
+    max_seconds: float = 0.0
+    """Wall-clock budget in seconds (0 = none); training stops and saves when it is spent."""
+    batch_rays: int = 4096
+    """Rays per step (reference 4096)."""
+    lr: float = 0.01
+    """Peak Adam learning rate of every parameter group (K-Planes reference 1e-2)."""
+    adam_eps: float = 1e-15
+    """Adam epsilon (nerfstudio K-Planes: 1e-15)."""
+    warmup_steps: int = 512
+    """Linear learning-rate warm-up steps (K-Planes: 512)."""
+    lr_final_ratio: float = 0.0
+    """Learning rate at the last step relative to the peak (cosine decay)."""
+    mixed_precision: str = "auto"
+    """'auto' (bf16 autocast on CUDA where supported, off on CPU), 'bf16', 'fp16' or 'off'."""
+    eval_every: int = 500
+    """Held-out PSNR every this many steps (0 = never)."""
+    eval_rays: int = 4096
+    """Fixed held-out rays used for the periodic PSNR."""
+    checkpoint_every: int = 5000
+    """Checkpoint every this many steps (and at the end, on SIGTERM and on the time budget)."""
+    keep_checkpoints: int = 2
+    """How many step checkpoints to keep."""
+    max_nonfinite: int = 20
+    """Stop after this many consecutive steps with a non-finite loss or gradient."""
+    render_chunk: int = 4096
+    """Rays per forward pass when rendering whole images."""
+    threads: int = 0
+    """torch CPU threads (0 = leave torch's default)."""
+
+
+@dataclass
+class RunConfig:
+    """A whole run: the method, its model and the training schedule."""
+
+    method: str = "livescene"
+    """Registered method name (livescene, mk-planes, mk-planes-star, conerf, k-planes)."""
+    preset: str = "gpu-paper"
+    """Preset the config started from."""
+    seed: int = 0
+    """Seed of every random generator (parameters, ray sampling, jitter)."""
+    data: str = ""
+    """Scene dataset the run trains on."""
+    language_targets: str = ""
+    """Language targets .npz (empty = no language table)."""
+    model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
+    """Model hyperparameters."""
+    train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
+    """Training schedule."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _build(cls: type, data: dict[str, Any], where: str) -> Any:
+    """Instantiate a dataclass from a dict, recursing into nested dataclasses; unknown keys are errors."""
+    if not isinstance(data, dict):
+        raise InputError(where, f"expected a mapping for {cls.__name__}, got {type(data).__name__}",
+                         "write the section as key: value pairs")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in fields:
+            raise InputError(where, f"unknown field {key!r} in {cls.__name__}",
+                             f"use one of {sorted(fields)}")
+        default = getattr(cls(), key)
+        if dataclasses.is_dataclass(default):
+            kwargs[key] = _build(type(default), value, f"{where}:{key}")
+        else:
+            kwargs[key] = _coerce(value, default, f"{where}:{key}")
+    return cls(**kwargs)
+
+
+def _coerce(value: Any, default: Any, where: str) -> Any:
+    """Give ``value`` the type of ``default`` (YAML reads 1e-3 as a string, ints where floats are meant)."""
+    try:
+        if isinstance(default, bool):
+            if isinstance(value, str):
+                if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError(value)
+                return value.lower() in ("true", "1", "yes")
+            return bool(value)
+        if isinstance(default, int):
+            if isinstance(value, float) and not value.is_integer():
+                raise ValueError(value)
+            return int(value)
+        if isinstance(default, float):
+            return float(value)
+        if isinstance(default, str):
+            return str(value)
+        if isinstance(default, list):
+            if not isinstance(value, list):
+                raise ValueError(value)
+            return value
+    except (TypeError, ValueError) as exc:
+        raise InputError(where, f"value {value!r} is not a valid {type(default).__name__}",
+                         f"write a {type(default).__name__} like {default!r}") from exc
+    return value
+
+
+def preset_path(preset: str) -> Path:
+    """A preset name (config/model/<name>.yaml) or a path to a YAML file."""
+    p = Path(preset)
+    if p.suffix in (".yaml", ".yml") and p.is_file():
+        return p
+    candidate = PRESET_DIR / f"{preset}.yaml"
+    if candidate.is_file():
+        return candidate
+    names = sorted(x.stem for x in PRESET_DIR.glob("*.yaml")) if PRESET_DIR.is_dir() else []
+    raise InputError(candidate, f"preset {preset!r} not found", f"use one of {names} or a path to a YAML file")
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``model.field.channels=16`` -> (['model', 'field', 'channels'], 16); the value is parsed as YAML."""
+    if "=" not in text:
+        raise InputError("--set", f"{text!r} is not key=value", "write e.g. --set train.batch_rays=2048")
+    key, value = text.split("=", 1)
+    return key.strip().split("."), yaml.safe_load(value)
+
+
+def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, **top: Any) -> RunConfig:
+    """A RunConfig from a preset, then ``--set`` overrides, then top-level fields (method, seed, data...)."""
+    path = preset_path(preset)
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise InputError(path, f"not valid YAML ({exc})", "repair the preset") from exc
+    if not isinstance(data, dict):
+        raise InputError(path, "top level is not a mapping", "write sections model: and train:")
+    data.setdefault("preset", path.stem)
+    for text in overrides or []:
+        keys, value = parse_override(text)
+        node = data
+        for k in keys[:-1]:
+            node = node.setdefault(k, {})
+            if not isinstance(node, dict):
+                raise InputError("--set", f"{text!r}: {k} is not a section", "name a field inside a section")
+        node[keys[-1]] = value
+    for k, v in top.items():
+        if v is not None:
+            data[k] = v
+    return _build(RunConfig, data, str(path))
+
+
+def config_from_dict(data: dict[str, Any], where: str = "config.yaml") -> RunConfig:
+    """Rebuild a RunConfig saved by ``RunConfig.to_dict`` (run folders, checkpoints)."""
+    return _build(RunConfig, data, where)

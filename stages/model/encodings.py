@@ -1,0 +1,171 @@
+"""Feature encodings: multi-scale K-Planes over any axis pairs, spherical harmonics, 1D grids.
+
+K-Planes (Fridovich-Keil et al. 2023) factorises an N-D feature grid into 2D
+planes, one per chosen pair of axes; a point's feature is the Hadamard product
+of its bilinear samples on every plane. Planes that touch a non-spatial axis
+(k, time, a state) start at 1, the product's identity, so a fresh field is
+independent of that axis; spatial planes start uniform in a small range.
+LiveScene uses the six planes of (x, y, z, k); the MK-Planes baselines use
+other pair lists of (x, y, z, k_1..k_alpha), hence ``pairs`` is free.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+def all_pairs(n_dims: int) -> list[tuple[int, int]]:
+    """Every axis pair of an ``n_dims`` coordinate: 4D -> xy, xz, xk, yz, yk, zk."""
+    return list(itertools.combinations(range(n_dims), 2))
+
+
+def sample_plane(plane: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
+    """Bilinear sample of ``plane`` [1, C, H, W] at ``coords`` [N, 2] in [-1, 1] (x -> W, y -> H) -> [N, C].
+
+    ``align_corners=True``: -1 and 1 hit the first and last grid vertices, so a
+    plane of resolution R has R vertices spanning the box.
+    """
+    grid = coords.view(1, -1, 1, 2).to(plane.dtype)
+    out = F.grid_sample(plane, grid, mode="bilinear", padding_mode="border", align_corners=True)  # [1, C, N, 1]
+    return out[0, :, :, 0].transpose(0, 1)
+
+
+class KPlanesEncoding(nn.Module):
+    """One scale of K-Planes: planes over ``pairs`` of an N-D coordinate, combined by product.
+
+    Args:
+        resolution: vertices per axis, one entry per input dimension.
+        channels: feature channels of every plane.
+        pairs: axis pairs that get a plane (default: all pairs).
+        spatial_dims: axes ``< spatial_dims`` are spatial; planes touching any
+            other axis are initialised to 1.
+        init_range: uniform init of purely spatial planes.
+    """
+
+    def __init__(self, resolution: Sequence[int], channels: int, pairs: Sequence[tuple[int, int]] | None = None,
+                 spatial_dims: int = 3, init_range: Sequence[float] = (0.1, 0.5)) -> None:
+        super().__init__()
+        self.resolution = [int(r) for r in resolution]
+        self.n_dims = len(self.resolution)
+        self.channels = int(channels)
+        self.pairs = [tuple(p) for p in (pairs if pairs is not None else all_pairs(self.n_dims))]
+        self.spatial_dims = spatial_dims
+        self.planes = nn.ParameterList()
+        for a, b in self.pairs:
+            if not (0 <= a < self.n_dims and 0 <= b < self.n_dims and a != b):
+                raise ValueError(f"plane pair {(a, b)} is not two distinct axes of a {self.n_dims}-D coordinate")
+            # [1, C, res_b, res_a]: grid_sample reads the first coordinate along W (axis a), the second along H
+            plane = torch.empty(1, self.channels, self.resolution[b], self.resolution[a])
+            if self.touches_non_spatial(a, b):
+                nn.init.ones_(plane)
+            else:
+                nn.init.uniform_(plane, float(init_range[0]), float(init_range[1]))
+            self.planes.append(nn.Parameter(plane))
+
+    def touches_non_spatial(self, a: int, b: int) -> bool:
+        return a >= self.spatial_dims or b >= self.spatial_dims
+
+    @property
+    def k_plane_indices(self) -> list[int]:
+        """Indices of planes that involve a non-spatial axis (k, time, states)."""
+        return [i for i, (a, b) in enumerate(self.pairs) if self.touches_non_spatial(a, b)]
+
+    @property
+    def out_dim(self) -> int:
+        return self.channels
+
+    def forward(self, coords: torch.Tensor) -> torch.Tensor:
+        """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
+        out: torch.Tensor | None = None
+        for plane, (a, b) in zip(self.planes, self.pairs, strict=True):
+            f = sample_plane(plane, coords[:, [a, b]])
+            out = f if out is None else out * f
+        assert out is not None
+        return out
+
+
+class MultiScaleKPlanes(nn.Module):
+    """K-Planes at several spatial scales; non-spatial axes keep their resolution. Features concatenated."""
+
+    def __init__(self, base_resolution: Sequence[int], channels: int, scales: Sequence[int] = (1,),
+                 pairs: Sequence[tuple[int, int]] | None = None, spatial_dims: int = 3,
+                 init_range: Sequence[float] = (0.1, 0.5)) -> None:
+        super().__init__()
+        self.grids = nn.ModuleList()
+        for s in scales:
+            res = [int(r) * int(s) if i < spatial_dims else int(r) for i, r in enumerate(base_resolution)]
+            self.grids.append(KPlanesEncoding(res, channels, pairs, spatial_dims, init_range))
+
+    @property
+    def out_dim(self) -> int:
+        return sum(g.out_dim for g in self.grids)
+
+    def forward(self, coords: torch.Tensor) -> torch.Tensor:
+        return torch.cat([g(coords) for g in self.grids], dim=-1)
+
+
+class SHEncoding(nn.Module):
+    """Real spherical harmonics of unit directions up to ``degree`` (4 -> 16 components)."""
+
+    def __init__(self, degree: int = 4) -> None:
+        super().__init__()
+        if not 1 <= degree <= 4:
+            raise ValueError(f"SH degree must be 1..4, got {degree}")
+        self.degree = degree
+
+    @property
+    def out_dim(self) -> int:
+        return self.degree**2
+
+    def forward(self, directions: torch.Tensor) -> torch.Tensor:
+        """``directions`` [N, 3] (unit) -> [N, degree**2]."""
+        x, y, z = directions.unbind(-1)
+        out = [torch.full_like(x, 0.28209479177387814)]
+        if self.degree > 1:
+            out += [-0.48860251190291987 * y, 0.48860251190291987 * z, -0.48860251190291987 * x]
+        if self.degree > 2:
+            xx, yy, zz = x * x, y * y, z * z
+            out += [1.0925484305920792 * x * y, -1.0925484305920792 * y * z,
+                    0.94617469575755997 * zz - 0.31539156525251999,
+                    -1.0925484305920792 * x * z, 0.54627421529603959 * (xx - yy)]
+        if self.degree > 3:
+            out += [0.59004358992664352 * y * (-3.0 * xx + yy), 2.8906114426405538 * x * y * z,
+                    0.45704579946446572 * y * (1.0 - 5.0 * zz), 0.3731763325901154 * z * (5.0 * zz - 3.0),
+                    0.45704579946446572 * x * (1.0 - 5.0 * zz), 1.4453057213202769 * z * (xx - yy),
+                    0.59004358992664352 * x * (-xx + 3.0 * yy)]
+        return torch.stack(out, dim=-1)
+
+
+class Grid1DEncoding(nn.Module):
+    """A learnable 1D grid of ``resolution + 1`` vertices over [0, 1], linearly interpolated."""
+
+    def __init__(self, resolution: int, channels: int, init_range: Sequence[float] = (0.0, 1.0)) -> None:
+        super().__init__()
+        self.resolution = int(resolution)
+        self.values = nn.Parameter(torch.empty(self.resolution + 1, channels))
+        nn.init.uniform_(self.values, float(init_range[0]), float(init_range[1]))
+
+    def forward(self, t: torch.Tensor) -> torch.Tensor:
+        """``t`` [N] in [0, 1] -> [N, channels]."""
+        pos = t.clamp(0.0, 1.0) * self.resolution
+        lo = pos.floor().clamp(max=self.resolution - 1).long()
+        frac = (pos - lo.to(pos.dtype)).unsqueeze(-1)
+        return self.values[lo] * (1.0 - frac) + self.values[lo + 1] * frac
+
+
+def sinusoidal_encoding(t: torch.Tensor, channels: int, scale: float = 2 * math.pi,
+                        base: float = 1000.0) -> torch.Tensor:
+    """Transformer-style sin/cos of ``t`` [N] -> [N, channels] (channels even), frequencies base^(-2i/channels)."""
+    half = torch.arange(0, channels, 2, device=t.device, dtype=torch.float32)
+    freq = torch.exp(half * (-math.log(base) / channels))
+    arg = t.float().unsqueeze(-1) * scale * freq
+    out = torch.zeros(*t.shape, channels, device=t.device, dtype=torch.float32)
+    out[..., 0::2] = torch.sin(arg)
+    out[..., 1::2] = torch.cos(arg)
+    return out

@@ -1,0 +1,52 @@
+"""The interaction probability field (METHOD.md section 2): which object's state drives each point.
+
+A tri-plane (xy, xz, yz; planes multiplied; sigmoid) is sampled at the
+normalised position and decoded together with the whole state vector by an
+MLP into ``alpha + 1`` logits (background last). The argmax over the object
+logits picks the object ``u`` whose state ``kappa_u`` becomes the sample's 4th
+coordinate: 3 + alpha dimensions are projected to 4. The argmax has no
+gradient, so the logits are trained by the mask losses only.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ..config import ProbabilityConfig
+from ..encodings import KPlanesEncoding
+from ..mlp import mlp
+
+
+class ProbabilityField(nn.Module):
+    """Positions [N, 3] in [-1, 1] and states [N, alpha] -> logits [N, alpha + 1]."""
+
+    def __init__(self, config: ProbabilityConfig, n_objects: int) -> None:
+        super().__init__()
+        self.config = config
+        self.n_objects = n_objects
+        r = config.resolution
+        self.encoding = KPlanesEncoding([r, r, r], config.channels, None, 3, config.init_range)
+        self.decoder = mlp(config.channels + n_objects, config.hidden, 1, n_objects + 1)
+
+    def forward(self, positions: torch.Tensor, states: torch.Tensor) -> torch.Tensor:
+        features = torch.sigmoid(self.encoding(positions))
+        return self.decoder(torch.cat([features, states.to(features.dtype)], dim=-1)).float()
+
+    def project(self, logits: torch.Tensor, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The k coordinate of every sample: ``kappa_u`` with ``u`` = argmax over the object logits.
+
+        ``logits`` [N, alpha + 1], ``states`` [N, alpha] -> (k [N] in [0, 1], u [N] long).
+        Samples whose best object probability is under the rejection threshold
+        get the static value. ``k`` keeps the gradient of ``states`` (learned-state mode).
+        """
+        if self.n_objects == 0:  # a static scene: every sample sits at the static value
+            z = torch.zeros(logits.shape[0], dtype=torch.long, device=logits.device)
+            return torch.full_like(logits[:, 0], self.config.static_value), z
+        with torch.no_grad():
+            probs = torch.softmax(logits.float(), dim=-1)[:, : self.n_objects]
+            best, u = probs.max(dim=-1)
+        k = torch.gather(states, 1, u[:, None])[:, 0]
+        if self.config.rejection_threshold > 0:
+            k = torch.where(best >= self.config.rejection_threshold, k, torch.full_like(k, self.config.static_value))
+        return k, u

@@ -1,0 +1,129 @@
+"""Every loss term of METHOD.md section 5, each a small function; weights live in ``LossWeights``.
+
+Regularisers on K-Planes follow the K-Planes paper: total variation of the
+planes (for planes with a k axis only along their spatial axis), L1 of the k
+planes to 1 (a static scene needs no k), and second-difference smoothness
+along k.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from .encodings import KPlanesEncoding, MultiScaleKPlanes
+from .ray_samplers import RaySamples
+
+
+def rgb_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    return F.mse_loss(pred.float(), target.float())
+
+
+def _outer_envelope(t0: torch.Tensor, t1: torch.Tensor, y1: torch.Tensor) -> torch.Tensor:
+    """Mass of the histogram (edges t1 [R, S1 + 1], masses y1 [R, S1]) over each interval of t0 [R, S0 + 1]."""
+    cy1 = torch.cat([torch.zeros_like(y1[:, :1]), torch.cumsum(y1, dim=-1)], dim=-1)
+    last = y1.shape[-1] - 1
+    idx_lo = (torch.searchsorted(t1[:, :-1].contiguous(), t0[:, :-1].contiguous(), side="right") - 1).clamp(0, last)
+    idx_hi = torch.searchsorted(t1[:, 1:].contiguous(), t0[:, 1:].contiguous(), side="right").clamp(0, last)
+    return torch.gather(cy1[:, 1:], 1, idx_hi) - torch.gather(cy1[:, :-1], 1, idx_lo)
+
+
+def interlevel_loss(proposal: list[tuple[RaySamples, torch.Tensor]],
+                    final: tuple[RaySamples, torch.Tensor]) -> torch.Tensor:
+    """Mip-NeRF 360 proposal loss: proposal weights must bound the (detached) final weights from above."""
+    samples, weights = final
+    c, w = samples.bins.detach(), weights.detach().float()
+    total = torch.zeros((), device=w.device)
+    for ps, pw in proposal:
+        envelope = _outer_envelope(c, ps.bins.detach(), pw.float())
+        total = total + (torch.clamp(w - envelope, min=0.0) ** 2 / (w + 1.1920929e-07)).mean()
+    return total
+
+
+def distortion_loss(samples: RaySamples, weights: torch.Tensor, nears: torch.Tensor,
+                    fars: torch.Tensor) -> torch.Tensor:
+    """Mip-NeRF 360 distortion on normalised ray distance, in O(S) with cumulative sums."""
+    span = (fars - nears).clamp(min=1e-6)[:, None]
+    s = (samples.bins - nears[:, None]) / span
+    mids = 0.5 * (s[:, 1:] + s[:, :-1])
+    widths = s[:, 1:] - s[:, :-1]
+    w = weights.float()
+    # sum_{i,j} w_i w_j |m_i - m_j| = 2 sum_i w_i (m_i W_<i - (wm)_<i) for sorted m
+    w_before = torch.cumsum(w, dim=-1) - w
+    wm_before = torch.cumsum(w * mids, dim=-1) - w * mids
+    inter = 2.0 * (w * (mids * w_before - wm_before)).sum(dim=-1)
+    intra = (w**2 * widths).sum(dim=-1) / 3.0
+    return (inter + intra).mean()
+
+
+def _grids(encoding: KPlanesEncoding | MultiScaleKPlanes) -> list[KPlanesEncoding]:
+    return list(encoding.grids) if isinstance(encoding, MultiScaleKPlanes) else [encoding]
+
+
+def plane_tv(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
+    """Mean squared neighbour difference over every plane; k planes only along their spatial axis (W)."""
+    total, count = None, 0
+    for grid in _grids(encoding):
+        k_idx = set(grid.k_plane_indices)
+        for i, plane in enumerate(grid.planes):
+            # a k plane (a, k) stores the spatial axis a along W, k along H
+            tv = (plane[..., :, 1:] - plane[..., :, :-1]).square().mean()
+            if i not in k_idx:
+                tv = tv + (plane[..., 1:, :] - plane[..., :-1, :]).square().mean()
+            total = tv if total is None else total + tv
+            count += 1
+    return total / max(count, 1) if total is not None else torch.zeros(())
+
+
+def k_planes_l1(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
+    """Mean |1 - plane| over the planes with a k axis (0 when the field ignores k)."""
+    terms = [(1.0 - grid.planes[i]).abs().mean() for grid in _grids(encoding) for i in grid.k_plane_indices]
+    return torch.stack(terms).mean() if terms else torch.zeros(())
+
+
+def k_smoothness(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
+    """Mean squared second difference along the k axis (H) of the k planes."""
+    terms = []
+    for grid in _grids(encoding):
+        for i in grid.k_plane_indices:
+            p = grid.planes[i]
+            if p.shape[-2] >= 3:
+                terms.append((p[..., 2:, :] - 2 * p[..., 1:-1, :] + p[..., :-2, :]).square().mean())
+    return torch.stack(terms).mean() if terms else torch.zeros(())
+
+
+def focal_mask_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, gamma: float = 1.5) -> torch.Tensor:
+    """``0.5 * (1 - exp(-CE))^gamma * CE`` of rendered logits [R, C] vs labels [R] (-1 = no label, skipped)."""
+    valid = labels >= 0
+    if not bool(valid.any()):
+        return rendered_logits.sum() * 0.0
+    ce = F.cross_entropy(rendered_logits[valid].float(), labels[valid], reduction="none")
+    return (0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce).mean()
+
+
+def repulsion_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, margin: float = 10.0) -> torch.Tensor:
+    """Pairs (first half, second half) of a randomly drawn batch; differing labels: ELU(K - L1 dist) + 1."""
+    half = rendered_logits.shape[0] // 2
+    a, b = rendered_logits[:half].float(), rendered_logits[half : 2 * half].float()
+    la, lb = labels[:half], labels[half : 2 * half]
+    differ = (la != lb) & (la >= 0) & (lb >= 0)
+    if not bool(differ.any()):
+        return rendered_logits.sum() * 0.0
+    dist = (a[differ] - b[differ]).abs().sum(dim=-1)
+    return (F.elu(margin - dist) + 1.0).mean()
+
+
+def language_loss(rendered: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
+                  delta: float = 1.25) -> torch.Tensor:
+    """Huber loss of rendered embeddings [R, D] vs targets [R, D] on rays with a label."""
+    if not bool(valid.any()):
+        return rendered.sum() * 0.0
+    return F.huber_loss(rendered[valid].float(), target[valid].float(), delta=delta, reduction="none").sum(-1).mean()
+
+
+def state_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """MSE of learned states vs key-frame values; NaN targets (object not annotated) are skipped."""
+    valid = torch.isfinite(target)
+    if not bool(valid.any()):
+        return predicted.sum() * 0.0
+    return (predicted[valid] - target[valid]).square().mean()

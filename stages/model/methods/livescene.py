@@ -1,0 +1,222 @@
+"""LiveScene (METHOD.md): proposal sampling with the k-projection at every level, one shared 4D field.
+
+Per level: sample positions -> interaction probability field (logits for the
+mask losses) -> argmax object ``u`` -> 4D coordinate (x, y, z, kappa_u) ->
+proposal density (or, at the final level, the main radiance field). Baselines
+subclass this model and override ``field_dims`` / ``coordinates`` to feed the
+same sampler, trainer and losses a different field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+from torch import nn
+
+from .. import losses as L
+from ..config import ModelConfig
+from ..fields import DensityField, LanguageTable, ProbabilityField, RadianceField, StateField
+from ..language_targets import LanguageTargets
+from ..ray_dataset import RayBatch
+from ..ray_samplers import ProposalSchedule, RaySamples, pdf_samples, uniform_samples
+from ..rays import RayBundle
+from ..renderers import render_accumulation, render_depth, render_features, render_rgb, render_weights
+
+
+@dataclass
+class SceneInfo:
+    """What a method needs to know about the scene to build itself."""
+
+    objects: list[str]
+    """Object names in state-vector order."""
+    n_frames: int
+    """Frames of the dataset (the learned-state grid spans their normalised index)."""
+    key_times: list[float] = field(default_factory=list)
+    """Normalised frame index of each key frame (learned-state supervision)."""
+    key_states: list[list[float]] = field(default_factory=list)
+    """Key-frame states [K, alpha]; NaN where an object is not annotated."""
+    language_dim: int = 0
+    """Language embedding width (0 = no language table)."""
+    language_levels: int = 0
+    """State levels of the language targets."""
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.objects)
+
+
+class LiveSceneModel(nn.Module):
+    """The LiveScene method; ``forward`` renders rays, ``loss_dict`` weighs every term of section 5."""
+
+    def __init__(self, config: ModelConfig, info: SceneInfo) -> None:
+        super().__init__()
+        self.config, self.info = config, info
+        alpha = info.n_objects
+        n_dims, pairs = self.field_dims()
+        self.n_dims = n_dims
+        self.field = RadianceField(config.field, n_dims, pairs)
+        fc = config.field
+        self.proposal_fields = nn.ModuleList([
+            DensityField([r, r, r] + [kr] * (n_dims - 3), config.proposal.channels, config.proposal.hidden,
+                         config.proposal.init_range, pairs, fc.density_bias, fc.density_exp_clamp)
+            for r, kr in config.proposal.resolutions])
+        if len(config.sampling.num_proposal_samples) != len(self.proposal_fields):
+            raise ValueError(f"{len(config.sampling.num_proposal_samples)} proposal sample counts for "
+                             f"{len(self.proposal_fields)} proposal fields; give one count per field")
+        self.probability_field = ProbabilityField(config.probability, alpha)
+        self.state_field = StateField(config.state, alpha) if config.state.mode == "learned" else None
+        self.language_table: LanguageTable | None = None
+        if info.language_dim > 0:
+            buckets = config.language.buckets or max(info.language_levels, 2)
+            self.language_table = LanguageTable(alpha, buckets, info.language_dim)
+        self.schedule = ProposalSchedule(config.sampling)
+        self.register_buffer("background", torch.tensor(config.sampling.background, dtype=torch.float32))
+        key_states = torch.tensor(info.key_states, dtype=torch.float32).reshape(-1, alpha)
+        self.register_buffer("key_times", torch.tensor(info.key_times, dtype=torch.float32))
+        self.register_buffer("key_states", key_states)
+
+    # -- hooks a baseline overrides ---------------------------------------------------------------------------
+    def field_dims(self) -> tuple[int, list[tuple[int, int]] | None]:
+        """Coordinate width of the radiance/proposal fields and their plane pairs (None = all pairs)."""
+        return 4, None
+
+    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
+                    times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Field coordinates of samples: (x, y, z, 2 kappa_u - 1). Returns (coords [N, D], k [N], u [N])."""
+        k, u = self.probability_field.project(logits, states)
+        return torch.cat([positions, (2.0 * k - 1.0).unsqueeze(-1).to(positions.dtype)], dim=-1), k, u
+
+    # -- states ---------------------------------------------------------------------------------------------
+    def ray_states(self, rays: RayBundle) -> torch.Tensor:
+        """[R, alpha]: given states, or the learned state at each ray's frame time."""
+        if self.state_field is not None and (rays.states is None or self.training):
+            assert rays.times is not None, "learned-state mode needs the frame time of every ray"
+            return self.state_field(rays.times)
+        if rays.states is None:
+            return torch.zeros(len(rays), self.info.n_objects, device=rays.origins.device)
+        return rays.states.float()
+
+    # -- rendering ------------------------------------------------------------------------------------------
+    def _level(self, rays: RayBundle, samples: RaySamples, states: torch.Tensor, final: bool,
+               grad_density: bool) -> dict[str, torch.Tensor]:
+        n_rays, n_samp = samples.bins.shape[0], samples.n_samples
+        mids = samples.mids
+        pos = (rays.origins[:, None, :] + rays.directions[:, None, :] * mids[..., None]).reshape(-1, 3)
+        pos = pos.clamp(-1.0, 1.0)
+        st = states[:, None, :].expand(n_rays, n_samp, states.shape[-1]).reshape(-1, states.shape[-1])
+        times = rays.times if rays.times is not None else torch.zeros(n_rays, device=pos.device)
+        t = times[:, None].expand(n_rays, n_samp).reshape(-1)
+        # the tri-plane is sampled at box-normalised positions (the reference code forgets to normalise)
+        logits = self.probability_field(pos, st)
+        coords, _, _ = self.coordinates(pos, st, logits, t)
+        out: dict[str, torch.Tensor] = {"logits": logits.view(n_rays, n_samp, -1)}
+        if final:
+            dirs = rays.directions[:, None, :].expand(n_rays, n_samp, 3).reshape(-1, 3)
+            sigma, rgb = self.field(coords, dirs)
+            out["rgb"] = rgb.view(n_rays, n_samp, 3)
+            if self.language_table is not None:
+                full_region = logits.detach().argmax(dim=-1)  # background samples take the background entry
+                if self.config.language.interpolate_by == "frame" or st.shape[1] == 0:
+                    value = t
+                else:
+                    value = torch.gather(st, 1, full_region.clamp(max=st.shape[1] - 1)[:, None])[:, 0]
+                out["language"] = self.language_table(full_region, value).view(n_rays, n_samp, -1)
+        else:
+            level = len(self._levels_done)
+            with torch.set_grad_enabled(grad_density and torch.is_grad_enabled()):
+                sigma = self.proposal_fields[level](coords)
+        out["density"] = sigma.view(n_rays, n_samp)
+        out["weights"] = render_weights(out["density"], samples.deltas)
+        return out
+
+    def forward(self, rays: RayBundle, step: int = 0, generator: torch.Generator | None = None) -> dict:
+        """Render rays. In training mode the result holds what ``loss_dict`` needs; in eval, images only."""
+        cfg = self.config.sampling
+        training = self.training
+        states = self.ray_states(rays)
+        grad_prop = training and self.schedule.updates_proposals(step)
+        anneal = self.schedule.anneal(step)
+        samples = uniform_samples(rays.nears, rays.fars, cfg.num_proposal_samples[0], training, cfg.single_jitter,
+                                  generator) if self.proposal_fields else uniform_samples(
+            rays.nears, rays.fars, cfg.num_samples, training, cfg.single_jitter, generator)
+        self._levels_done: list[tuple[RaySamples, dict]] = []
+        for i in range(len(self.proposal_fields)):
+            lvl = self._level(rays, samples, states, final=False, grad_density=grad_prop)
+            self._levels_done.append((samples, lvl))
+            n_next = cfg.num_proposal_samples[i + 1] if i + 1 < len(self.proposal_fields) else cfg.num_samples
+            w = lvl["weights"].detach()
+            samples = pdf_samples(samples, w.clamp(min=0) ** anneal if anneal != 1.0 else w, n_next, training,
+                                  cfg.single_jitter, cfg.histogram_padding, generator)
+        final = self._level(rays, samples, states, final=True, grad_density=True)
+        levels, self._levels_done = self._levels_done, []
+        w = final["weights"]
+        logits_final = render_features(w.detach(), final["logits"])
+        out: dict = {
+            "rgb": render_rgb(w, final["rgb"], self.background),
+            "depth": render_depth(w, samples.mids, rays.nears, rays.fars),
+            "accumulation": render_accumulation(w),
+            "logits": logits_final,
+            "states": states,
+        }
+        if "language" in final:
+            out["language"] = render_features(w.detach(), final["language"])
+        if training:
+            out["proposal"] = [(s, lv["weights"]) for s, lv in levels]
+            out["final"] = (samples, w)
+            out["level_logits"] = [render_features(lv["weights"].detach(), lv["logits"]) for _, lv in levels]
+            out["level_logits"].append(logits_final)
+        return out
+
+    # -- losses ---------------------------------------------------------------------------------------------
+    def loss_dict(self, out: dict, batch: RayBatch, step: int,
+                  language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:
+        """Every weighted loss term (terms with weight 0 are left out)."""
+        w = self.config.losses
+        rays = batch.rays
+        terms: dict[str, torch.Tensor] = {}
+
+        def add(name: str, weight: float, fn) -> None:
+            if weight != 0:
+                terms[name] = weight * fn()
+
+        add("rgb", w.rgb, lambda: L.rgb_loss(out["rgb"], batch.rgb))
+        if out["proposal"]:
+            add("interlevel", w.interlevel, lambda: L.interlevel_loss(out["proposal"], out["final"]))
+        add("distortion", w.distortion, lambda: L.distortion_loss(out["final"][0], out["final"][1], rays.nears,
+                                                                   rays.fars))
+        add("plane_tv", w.plane_tv, lambda: L.plane_tv(self.field.encoding))
+        add("plane_tv_proposal", w.plane_tv_proposal,
+            lambda: sum(L.plane_tv(p.encoding) for p in self.proposal_fields))
+        add("plane_tv_probability", w.plane_tv_probability, lambda: L.plane_tv(self.probability_field.encoding))
+        add("l1_k_planes", w.l1_k_planes, lambda: L.k_planes_l1(self.field.encoding))
+        add("l1_k_planes_proposal", w.l1_k_planes_proposal,
+            lambda: sum(L.k_planes_l1(p.encoding) for p in self.proposal_fields))
+        add("k_smoothness", w.k_smoothness, lambda: L.k_smoothness(self.field.encoding))
+        add("k_smoothness_proposal", w.k_smoothness_proposal,
+            lambda: sum(L.k_smoothness(p.encoding) for p in self.proposal_fields))
+        if self.info.n_objects > 0:
+            add("focal_mask", w.focal_mask,
+                lambda: sum(L.focal_mask_loss(lg, batch.labels) for lg in out["level_logits"]))
+            add("repulsion", w.repulsion,
+                lambda: sum(L.repulsion_loss(lg, batch.labels, w.repulsion_margin) for lg in out["level_logits"]))
+        if "language" in out and language is not None:
+            add("language", w.language, lambda: L.language_loss(
+                out["language"], language.targets(batch.labels, out["states"]), batch.labels >= 0,
+                self.config.language.huber_delta))
+        if self.state_field is not None and self.key_times.numel() > 0:
+            add("state_mse", w.state_mse, lambda: L.state_loss(self.state_field(self.key_times), self.key_states))
+        return terms
+
+    def param_groups(self) -> dict[str, list[nn.Parameter]]:
+        """Parameters by role (all share one learning rate schedule; the split is for reporting)."""
+        groups = {
+            "field": list(self.field.parameters()),
+            "proposal_fields": list(self.proposal_fields.parameters()),
+            "probability_field": list(self.probability_field.parameters()),
+        }
+        if self.state_field is not None:
+            groups["state_field"] = list(self.state_field.parameters())
+        if self.language_table is not None:
+            groups["language_table"] = list(self.language_table.parameters())
+        return groups

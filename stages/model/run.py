@@ -1,0 +1,152 @@
+"""Open a trained run and render any pose with any object states: the API evaluation, report and language use.
+
+``load_run(run_dir).render(camera, c2w, states, frame_index)`` takes the pose
+in the DATASET's world coordinates (OpenGL camera axes) and returns numpy
+arrays: ``rgb`` [H, W, 3], ``depth`` [H, W] (distance along the ray, dataset
+units), ``accumulation`` [H, W], ``probs`` [H, W, alpha + 1] (softmax of the
+rendered final-level logits, background last) and ``language`` [H, W, D] when
+the run was trained with language targets.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from stages.scene import Camera, InputError, generate_rays
+
+from .config import config_from_dict
+from .methods import SceneInfo, build_model
+from .rays import RayBundle
+from .scene_normalization import SceneNormalization, aabb_near_far
+
+States = Mapping[str, float] | Sequence[float] | np.ndarray | None
+
+
+class LoadedRun:
+    """A trained model in eval mode with its scene normalisation and per-frame states."""
+
+    def __init__(self, run_dir: Path, payload: dict[str, Any], device: str = "cpu") -> None:
+        self.run_dir = run_dir
+        self.device = torch.device(device)
+        self.config = config_from_dict(payload["config"], str(run_dir / "model.pt"))
+        self.method = str(payload["method"])
+        self.info = SceneInfo(**payload["info"])
+        self.model = build_model(self.method, self.config.model, self.info)
+        self.model.load_state_dict(payload["state_dict"])
+        self.model.to(self.device).eval()
+        self.norm = SceneNormalization.from_dict(payload["normalization"])
+        self.frame_states = np.asarray(payload["frame_states"], dtype=np.float64).reshape(-1, self.info.n_objects)
+        self.frame_ids = list(payload.get("frame_ids", []))
+        self.step = int(payload["step"])
+        self.language_encoder = payload.get("language_encoder")
+
+    @property
+    def objects(self) -> list[str]:
+        return list(self.info.objects)
+
+    @property
+    def n_frames(self) -> int:
+        return self.info.n_frames
+
+    @property
+    def state_mode(self) -> str:
+        return self.config.model.state.mode
+
+    def frame_time(self, frame_index: int) -> float:
+        n = self.info.n_frames
+        if not 0 <= frame_index < n:
+            raise InputError(self.run_dir, f"frame index {frame_index} outside the trained dataset's 0..{n - 1}",
+                             "pass the index of a frame of the dataset the run was trained on")
+        return frame_index / (n - 1) if n > 1 else 0.0
+
+    @torch.no_grad()
+    def learned_states(self, frame_indices: Sequence[int] | None = None) -> np.ndarray:
+        """States the model uses per frame: the state network's output (learned mode) or the dataset's."""
+        idx = list(range(self.n_frames)) if frame_indices is None else list(frame_indices)
+        state_field = getattr(self.model, "state_field", None)
+        if state_field is None:
+            return np.nan_to_num(self.frame_states[idx])
+        t = torch.tensor([self.frame_time(i) for i in idx], dtype=torch.float32, device=self.device)
+        return state_field(t).cpu().numpy().astype(np.float64)
+
+    def state_vector(self, states: States, frame_index: int | None = None) -> np.ndarray:
+        """Resolve ``states`` to one value per object; objects not named keep the frame's (or 0)."""
+        alpha = self.info.n_objects
+        base = self.learned_states([frame_index])[0] if frame_index is not None else np.zeros(alpha)
+        if states is None:
+            return base
+        if isinstance(states, Mapping):
+            unknown = sorted(set(states) - set(self.objects))
+            if unknown:
+                raise InputError(self.run_dir, f"unknown objects {unknown} in the state", f"use {self.objects}")
+            out = base.copy()
+            for j, name in enumerate(self.objects):
+                if name in states:
+                    out[j] = float(states[name])
+            return out
+        arr = np.asarray(states, dtype=np.float64).reshape(-1)
+        if arr.shape[0] != alpha:
+            raise InputError(self.run_dir, f"{arr.shape[0]} state values for {alpha} objects {self.objects}",
+                             "give one value per object, in this order")
+        return arr
+
+    @torch.no_grad()
+    def render_rays(self, origins: np.ndarray, directions: np.ndarray, state: np.ndarray,
+                    time_value: float = 0.0) -> dict[str, np.ndarray]:
+        """Render world-space rays [N, 3] with one state vector; returns flat arrays."""
+        o = torch.tensor(self.norm.points(origins.reshape(-1, 3)), dtype=torch.float32, device=self.device)
+        d = torch.tensor(directions.reshape(-1, 3), dtype=torch.float32, device=self.device)
+        d = d / d.norm(dim=-1, keepdim=True)
+        nears, fars = aabb_near_far(o, d, self.config.model.sampling.near_plane)
+        n = o.shape[0]
+        st = torch.tensor(state, dtype=torch.float32, device=self.device).expand(n, self.info.n_objects)
+        times = torch.full((n,), float(time_value), device=self.device)
+        rays = RayBundle(o, d, nears, fars, st, times)
+        chunk = self.config.train.render_chunk
+        parts: dict[str, list[torch.Tensor]] = {}
+        for i in range(0, n, chunk):
+            out = self.model(rays.slice(i, i + chunk), step=self.step)
+            parts.setdefault("rgb", []).append(out["rgb"].clamp(0, 1))
+            parts.setdefault("depth", []).append(out["depth"] / self.norm.scale)
+            parts.setdefault("accumulation", []).append(out["accumulation"])
+            parts.setdefault("probs", []).append(torch.softmax(out["logits"], dim=-1))
+            if "language" in out:
+                parts.setdefault("language", []).append(F.normalize(out["language"], dim=-1))
+        return {k: torch.cat(v).float().cpu().numpy() for k, v in parts.items()}
+
+    def render(self, camera: Camera, c2w: np.ndarray, states: States = None,
+               frame_index: int | None = None) -> dict[str, np.ndarray]:
+        """Render a full image of ``camera`` at pose ``c2w`` (dataset world, OpenGL) with ``states``."""
+        state = self.state_vector(states, frame_index)
+        origins, dirs = generate_rays(camera, np.asarray(c2w, dtype=np.float64))
+        t = self.frame_time(frame_index) if frame_index is not None else 0.0
+        flat = self.render_rays(origins, dirs, state, t)
+        h, w = camera.height, camera.width
+        return {k: v.reshape(h, w, *v.shape[1:]) for k, v in flat.items()}
+
+    def relevancy(self, camera: Camera, c2w: np.ndarray, states: States, query_embedding: np.ndarray,
+                  frame_index: int | None = None) -> np.ndarray:
+        """Cosine similarity [H, W] of the rendered language embedding with a query embedding."""
+        out = self.render(camera, c2w, states, frame_index)
+        if "language" not in out:
+            raise InputError(self.run_dir, "this run renders no language embedding",
+                             "train with --language-targets targets.npz")
+        q = np.asarray(query_embedding, dtype=np.float32)
+        return out["language"] @ (q / max(float(np.linalg.norm(q)), 1e-12))
+
+
+def load_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
+    """Open a run folder written by ``livescene train`` (needs model.pt)."""
+    run_dir = Path(run_dir)
+    path = run_dir / "model.pt"
+    if not path.is_file():
+        raise InputError(path, "no trained model in this run folder",
+                         "train one with `livescene train --data DS --out RUN` (or resume it to the end)")
+    payload = torch.load(path, map_location="cpu", weights_only=True)
+    return LoadedRun(run_dir, payload, device)

@@ -1,0 +1,63 @@
+"""``livescene train``: train LiveScene (or a registered baseline) on a scene dataset."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from stages.scene import InputError
+
+from .config import load_config
+from .trainer import Trainer, TrainingDiverged
+
+
+def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description=__doc__)
+    p.add_argument("--data", required=True, help="scene dataset folder (holds transforms.json)")
+    p.add_argument("--method", default="livescene", help="registered method name (default livescene)")
+    p.add_argument("--preset", default="cpu-demo", help="config/model/<name>.yaml or a YAML path (default cpu-demo)")
+    p.add_argument("--out", required=True, help="run folder to write")
+    p.add_argument("--state-mode", choices=["given", "learned"], help="given (dataset states) or learned")
+    p.add_argument("--language-targets", help="targets .npz from `livescene language targets`: enables the table")
+    p.add_argument("--max-seconds", type=float, help="wall-clock budget; training stops and saves when spent")
+    p.add_argument("--max-steps", type=int, help="optimisation steps (overrides the preset)")
+    p.add_argument("--seed", type=int, help="seed of every random generator (default 0)")
+    p.add_argument("--device", default="auto", help="auto | cpu | cuda (default auto)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config field, e.g. --set train.batch_rays=2048 (repeatable)")
+    p.add_argument("--resume", action="store_true", help="continue from the run folder's latest checkpoint")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    overrides = list(args.overrides)
+    if args.state_mode:
+        overrides.append(f"model.state.mode={args.state_mode}")
+    if args.max_seconds is not None:
+        overrides.append(f"train.max_seconds={args.max_seconds}")
+    if args.max_steps is not None:
+        overrides.append(f"train.max_steps={args.max_steps}")
+    try:
+        config = load_config(args.preset, overrides, method=args.method, seed=args.seed, data=args.data,
+                             language_targets=args.language_targets)
+        trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress)
+        summary = trainer.train()
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyError as exc:  # unknown method
+        print(f"error: {exc.args[0]}", file=sys.stderr)
+        return 2
+    except TrainingDiverged as exc:
+        print(f"error: training diverged: {exc}", file=sys.stderr)
+        return 1
+    if summary.get("status") == "sigterm":
+        print(f"stopped by SIGTERM at step {summary['step']}; checkpoint saved, resume with --resume",
+              file=sys.stderr)
+        return 143
+    print(json.dumps({k: summary[k] for k in ("method", "status", "steps", "train_seconds", "eval_psnr",
+                                              "peak_memory_mib")}))
+    return 0

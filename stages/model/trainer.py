@@ -1,0 +1,430 @@
+"""The shared trainer: ray batches, Adam with warm-up + cosine decay, finiteness checks, checkpoints, logs.
+
+Every method of the registry trains here. A run folder holds::
+
+    config.yaml              the full RunConfig (written first)
+    checkpoints/step_*.pt    model, optimiser, scheduler, every RNG state, wall time so far
+    train_log.csv            wall_s, step, lr, loss, each term, eval_psnr (periodic), rays_per_s
+    model.pt                 final weights + what load_run needs (written last)
+    run.json                 method, parameters, peak memory, train seconds, steps, device, objects, normalisation
+
+Resuming restores the RNG states of torch, numpy, Python and both samplers'
+generators, so on the CPU a resumed run is bit-identical to an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import random
+import resource
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
+
+from .config import LossWeights, RunConfig
+from .language_targets import LanguageTargets
+from .methods import SceneInfo, build_model
+from .ray_dataset import RayDataset, frame_times, state_vector
+from .scene_normalization import SceneNormalization
+
+MODEL_FORMAT = 1
+LOSS_COLUMNS = [f.name for f in dataclasses.fields(LossWeights) if f.name != "repulsion_margin"]
+LOG_COLUMNS = ["wall_s", "step", "lr", "loss", *LOSS_COLUMNS, "eval_psnr", "rays_per_s"]
+
+
+class TrainingDiverged(RuntimeError):
+    """Too many consecutive steps with a non-finite loss or gradient."""
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise InputError("--device", "CUDA requested but torch sees no GPU", "use --device cpu or auto")
+    return torch.device(name)
+
+
+def autocast_dtype(setting: str, device: torch.device) -> torch.dtype | None:
+    """bf16 on CUDA where supported ('auto'), never on CPU."""
+    if device.type != "cuda" or setting == "off":
+        return None
+    if setting in ("auto", "bf16"):
+        return torch.bfloat16 if torch.cuda.is_bf16_supported() else (torch.float16 if setting == "auto" else None)
+    if setting == "fp16":
+        return torch.float16
+    raise InputError("train.mixed_precision", f"unknown value {setting!r}", "use auto, bf16, fp16 or off")
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+def scene_info(ds: SceneDataset, config: RunConfig, language: LanguageTargets | None) -> SceneInfo:
+    """Objects, frame count, key frames (as normalised times) and language size of a dataset."""
+    times = frame_times(len(ds.frames))
+    key_t: list[float] = []
+    key_s: list[list[float]] = []
+    every = config.model.state.key_frame_every
+    if every > 0:
+        for i, f in enumerate(ds.frames):
+            if i % every == 0:
+                key_t.append(float(times[i]))
+                key_s.append(state_vector(ds, f).astype(float).tolist())
+    else:
+        index = {f.frame_id: i for i, f in enumerate(ds.frames)}
+        for fid, values in sorted(ds.key_frames.items()):
+            if fid in index:
+                key_t.append(float(times[index[fid]]))
+                key_s.append([float(values.get(o, math.nan)) for o in ds.objects])
+    return SceneInfo(objects=list(ds.objects), n_frames=len(ds.frames), key_times=key_t, key_states=key_s,
+                     language_dim=language.dim if language else 0,
+                     language_levels=int(language.levels.numel()) if language else 0)
+
+
+def lr_factor(step: int, warmup: int, total: int, final_ratio: float) -> float:
+    """Linear warm-up to 1, then cosine decay to ``final_ratio`` at ``total`` steps."""
+    if warmup > 0 and step < warmup:
+        return (step + 1) / warmup
+    progress = min(max(step - warmup, 0) / max(total - warmup, 1), 1.0)
+    return final_ratio + (1.0 - final_ratio) * 0.5 * (1.0 + math.cos(math.pi * progress))
+
+
+def peak_memory_mib(device: torch.device) -> float:
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated(device) / 2**20
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+
+
+def psnr_of(mse: float) -> float:
+    return -10.0 * math.log10(max(mse, 1e-12))
+
+
+class Trainer:
+    """Trains one method on one scene dataset into a run folder."""
+
+    def __init__(self, config: RunConfig, out_dir: str | Path, device: str = "auto", resume: bool = False,
+                 progress: bool = True) -> None:
+        self.config = config
+        self.out = Path(out_dir)
+        self.device = resolve_device(device)
+        self.resume = resume
+        self.progress = progress
+        self._stop_reason: str | None = None
+        self.amp_dtype = autocast_dtype(config.train.mixed_precision, self.device)
+        self._setup()
+
+    # -- setup ----------------------------------------------------------------------------------------------
+    def _setup(self) -> None:
+        cfg = self.config
+        if cfg.train.threads > 0:
+            torch.set_num_threads(cfg.train.threads)
+        if not cfg.data:
+            raise InputError("--data", "no dataset given", "pass --data DS (a scene dataset folder)")
+        self.ds = read_scene(cfg.data)
+        mode = cfg.model.state.mode
+        if mode not in ("given", "learned"):
+            raise InputError("--state-mode", f"unknown state mode {mode!r}", "use given or learned")
+        self.language = LanguageTargets.read(cfg.language_targets, self.ds.objects) if cfg.language_targets else None
+        seed_everything(cfg.seed)
+        self.norm = SceneNormalization.from_dataset(self.ds)
+        train_frames = self.ds.frames_in("train") or self.ds.frames
+        test_frames = self.ds.frames_in("test") or train_frames
+        near = cfg.model.sampling.near_plane
+        self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=mode == "given")
+        self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=mode == "given")
+        self.info = scene_info(self.ds, cfg, self.language)
+        if mode == "learned" and not self.info.key_times:
+            raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
+                             "annotate key frames, or set --set model.state.key_frame_every=N")
+        self.model = build_model(cfg.method, cfg.model, self.info).to(self.device)
+        if self.language is not None:
+            self.language = self.language.to(self.device)
+        params = [p for p in self.model.parameters() if p.requires_grad]
+        self.optimizer = torch.optim.Adam(params, lr=cfg.train.lr, eps=cfg.train.adam_eps)
+        t = cfg.train
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+            self.optimizer, lambda s: lr_factor(s, t.warmup_steps, t.max_steps, t.lr_final_ratio))
+        self.scaler = torch.amp.GradScaler("cuda") if self.amp_dtype == torch.float16 else None
+        self.ray_generator = torch.Generator().manual_seed(cfg.seed)
+        self.jitter_generator = torch.Generator(device=self.device).manual_seed(cfg.seed + 1)
+        eval_gen = torch.Generator().manual_seed(cfg.seed + 2)
+        n_eval = min(cfg.train.eval_rays, self.eval_rays.n_rays)
+        self.eval_index = torch.randperm(self.eval_rays.n_rays, generator=eval_gen)[:n_eval]
+        self.step = 0
+        self.wall_before = 0.0
+        self.nonfinite_streak = 0
+        self.log_rows: list[dict[str, Any]] = []
+
+    # -- checkpoints ----------------------------------------------------------------------------------------
+    def checkpoint_path(self, step: int) -> Path:
+        return self.out / "checkpoints" / f"step_{step:06d}.pt"
+
+    def latest_checkpoint(self) -> Path | None:
+        found = sorted((self.out / "checkpoints").glob("step_*.pt"))
+        return found[-1] if found else None
+
+    def save_checkpoint(self, wall_s: float) -> Path:
+        if not all(bool(torch.isfinite(p).all()) for p in self.model.parameters()):
+            raise TrainingDiverged(f"parameters are not finite at step {self.step}; no checkpoint written")
+        state = {
+            "step": self.step,
+            "wall_s": wall_s,
+            "nonfinite_streak": self.nonfinite_streak,
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "scaler": self.scaler.state_dict() if self.scaler else None,
+            "rng": {
+                "torch": torch.get_rng_state(),
+                "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
+                "numpy": np.random.get_state(),
+                "python": random.getstate(),
+                "rays": self.ray_generator.get_state(),
+                "jitter": self.jitter_generator.get_state(),
+            },
+            "config": self.config.to_dict(),
+        }
+        path = self.checkpoint_path(self.step)
+        with atomic_path(path, suffix=".pt") as tmp:
+            torch.save(state, tmp)
+        kept = sorted((self.out / "checkpoints").glob("step_*.pt"))
+        for old in kept[: max(len(kept) - max(self.config.train.keep_checkpoints, 1), 0)]:
+            old.unlink(missing_ok=True)
+        return path
+
+    def load_checkpoint(self, path: Path) -> None:
+        state = torch.load(path, map_location=self.device, weights_only=False)
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        if self.scaler is not None and state.get("scaler"):
+            self.scaler.load_state_dict(state["scaler"])
+        rng = state["rng"]
+        torch.set_rng_state(rng["torch"])
+        if rng.get("cuda") is not None and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(rng["cuda"])
+        np.random.set_state(rng["numpy"])
+        random.setstate(rng["python"])
+        self.ray_generator.set_state(rng["rays"])
+        self.jitter_generator.set_state(rng["jitter"].to(self.jitter_generator.device)
+                                        if hasattr(rng["jitter"], "to") else rng["jitter"])
+        self.step = int(state["step"])
+        self.wall_before = float(state["wall_s"])
+        self.nonfinite_streak = int(state.get("nonfinite_streak", 0))
+        log = self.out / "train_log.csv"
+        if log.is_file():
+            with log.open() as fh:
+                self.log_rows = [r for r in csv.DictReader(fh) if int(float(r["step"])) <= self.step]
+
+    # -- one step -------------------------------------------------------------------------------------------
+    def _autocast(self) -> Any:
+        if self.amp_dtype is None:
+            return torch.autocast(device_type=self.device.type, enabled=False)
+        return torch.autocast(device_type="cuda", dtype=self.amp_dtype)
+
+    def train_step(self) -> dict[str, float] | None:
+        """One optimisation step; None when it was skipped for a non-finite loss or gradient."""
+        self.model.train()
+        batch = self.train_rays.sample(self.config.train.batch_rays, self.ray_generator)
+        with self._autocast():
+            out = self.model(batch.rays, step=self.step, generator=self.jitter_generator)
+            terms = self.model.loss_dict(out, batch, self.step, self.language)
+        names = list(terms)
+        values = torch.stack([terms[n].float() for n in names])
+        finite = torch.isfinite(values)
+        self.optimizer.zero_grad(set_to_none=True)
+        if not bool(finite.all()):
+            bad = [n for n, ok in zip(names, finite.tolist(), strict=True) if not ok]
+            return self._skip(f"non-finite loss term(s) {bad}")
+        loss = values.sum()
+        if self.scaler is not None:
+            self.scaler.scale(loss).backward()
+            self.scaler.unscale_(self.optimizer)
+        else:
+            loss.backward()
+        grads = [p.grad for p in self.model.parameters() if p.grad is not None]
+        if grads and not bool(torch.isfinite(torch.stack([g.float().norm() for g in grads])).all()):
+            return self._skip("non-finite gradient")
+        if self.scaler is not None:
+            self.scaler.step(self.optimizer)
+            self.scaler.update()
+        else:
+            self.optimizer.step()
+        self.scheduler.step()
+        self.nonfinite_streak = 0
+        result = {n: float(v) for n, v in zip(names, values.detach().cpu().tolist(), strict=True)}
+        result["loss"] = float(loss.detach())
+        return result
+
+    def _skip(self, why: str) -> None:
+        self.optimizer.zero_grad(set_to_none=True)
+        self.nonfinite_streak += 1
+        tqdm.write(f"step {self.step}: skipped ({why}); {self.nonfinite_streak} in a row", file=sys.stderr)
+        if self.nonfinite_streak >= self.config.train.max_nonfinite:
+            raise TrainingDiverged(f"{self.nonfinite_streak} consecutive steps with {why}; stopped at step "
+                                   f"{self.step} without saving (the last checkpoint is the last finite state)")
+        return None
+
+    @torch.no_grad()
+    def evaluate(self) -> float:
+        """PSNR of the fixed held-out rays."""
+        self.model.eval()
+        chunk = self.config.train.render_chunk
+        err, n = 0.0, 0
+        for i in range(0, len(self.eval_index), chunk):
+            batch = self.eval_rays.batch(self.eval_index[i : i + chunk])
+            with self._autocast():
+                out = self.model(batch.rays, step=self.step)
+            err += float((out["rgb"].float().clamp(0, 1) - batch.rgb).square().sum())
+            n += batch.rgb.numel()
+        self.model.train()
+        return psnr_of(err / max(n, 1))
+
+    # -- the loop -------------------------------------------------------------------------------------------
+    def _on_sigterm(self, signum: int, frame: Any) -> None:
+        self._stop_reason = "sigterm"
+
+    def _write_log(self) -> None:
+        with atomic_path(self.out / "train_log.csv", suffix=".csv") as tmp, tmp.open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=LOG_COLUMNS, extrasaction="ignore")
+            writer.writeheader()
+            writer.writerows(self.log_rows)
+
+    def train(self) -> dict[str, Any]:
+        cfg = self.config
+        self.out.mkdir(parents=True, exist_ok=True)
+        if self.resume:
+            ckpt = self.latest_checkpoint()
+            if ckpt is not None:
+                self.load_checkpoint(ckpt)
+        elif (self.out / "checkpoints").is_dir() and any((self.out / "checkpoints").glob("step_*.pt")):
+            raise InputError(self.out, "already holds checkpoints of a run",
+                             "pass --resume to continue it, or choose a new --out folder")
+        write_yaml(self.out / "config.yaml", cfg.to_dict())
+        old_handler = None
+        try:
+            old_handler = signal.signal(signal.SIGTERM, self._on_sigterm)
+        except ValueError:  # not the main thread: no signal handling
+            old_handler = None
+        if self.device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats(self.device)
+        t0 = time.perf_counter()
+        max_seconds = cfg.train.max_seconds
+        bar = tqdm(total=cfg.train.max_steps, initial=self.step, unit="step", disable=not self.progress,
+                   dynamic_ncols=True, desc=f"train {cfg.method}")
+        last_psnr: float | None = None
+        window_t, window_steps = time.perf_counter(), 0
+        rays_per_s = 0.0
+        status = "completed"
+        try:
+            while self.step < cfg.train.max_steps:
+                elapsed = self.wall_before + time.perf_counter() - t0
+                if max_seconds > 0 and elapsed >= max_seconds:
+                    status = "time_budget"
+                    break
+                if self._stop_reason:
+                    status = self._stop_reason
+                    break
+                result = self.train_step()
+                self.step += 1
+                window_steps += 1
+                now = time.perf_counter()
+                if now - window_t > 2.0:
+                    rays_per_s = window_steps * cfg.train.batch_rays / (now - window_t)
+                    window_t, window_steps = now, 0
+                eval_psnr = None
+                if cfg.train.eval_every > 0 and (self.step % cfg.train.eval_every == 0
+                                                 or self.step == cfg.train.max_steps):
+                    eval_psnr = last_psnr = self.evaluate()
+                if result is not None:
+                    row = {"wall_s": round(self.wall_before + time.perf_counter() - t0, 3), "step": self.step,
+                           "lr": self.scheduler.get_last_lr()[0], "eval_psnr": eval_psnr,
+                           "rays_per_s": round(rays_per_s, 1), **result}
+                    self.log_rows.append(row)
+                    if self.step % 10 == 0 or eval_psnr is not None:
+                        post = {"loss": f"{result['loss']:.4f}", "rays/s": f"{rays_per_s:.0f}"}
+                        if last_psnr is not None:
+                            post["psnr"] = f"{last_psnr:.2f}"
+                        if max_seconds > 0:
+                            post["left_s"] = f"{max(max_seconds - elapsed, 0):.0f}"
+                        bar.set_postfix(post, refresh=False)
+                bar.update(1)
+                if cfg.train.checkpoint_every > 0 and self.step % cfg.train.checkpoint_every == 0:
+                    self.save_checkpoint(self.wall_before + time.perf_counter() - t0)
+                    self._write_log()
+        finally:
+            bar.close()
+            if old_handler is not None:
+                signal.signal(signal.SIGTERM, old_handler)
+        wall = self.wall_before + time.perf_counter() - t0
+        if status != "completed" and self.log_rows and cfg.train.eval_every > 0:
+            last_psnr = self.evaluate()
+            self.log_rows[-1]["eval_psnr"] = last_psnr
+        self.save_checkpoint(wall)
+        self._write_log()
+        if status == "sigterm":
+            return {"status": status, "step": self.step}
+        summary = self.finish(wall, status, last_psnr)
+        return summary
+
+    def parameter_counts(self) -> dict[str, int]:
+        groups = self.model.param_groups() if hasattr(self.model, "param_groups") else {"all": list(
+            self.model.parameters())}
+        counts = {k: int(sum(p.numel() for p in v)) for k, v in groups.items()}
+        counts["total"] = int(sum(p.numel() for p in self.model.parameters()))
+        return counts
+
+    def finish(self, wall: float, status: str, eval_psnr: float | None) -> dict[str, Any]:
+        """Write model.pt and run.json (the run is complete once run.json exists)."""
+        cfg = self.config
+        frame_states = [state_vector(self.ds, f).astype(float).tolist() for f in self.ds.frames]
+        payload = {
+            "format": MODEL_FORMAT,
+            "method": cfg.method,
+            "config": cfg.to_dict(),
+            "info": dataclasses.asdict(self.info),
+            "state_dict": self.model.state_dict(),
+            "normalization": self.norm.to_dict(),
+            "frame_states": frame_states,
+            "frame_ids": [f.frame_id for f in self.ds.frames],
+            "step": self.step,
+            "language_encoder": self.language.encoder if self.language else None,
+        }
+        with atomic_path(self.out / "model.pt", suffix=".pt") as tmp:
+            torch.save(payload, tmp)
+        run = {
+            "method": cfg.method,
+            "preset": cfg.preset,
+            "status": status,
+            "steps": self.step,
+            "train_seconds": round(wall, 2),
+            "device": str(self.device) + (f" ({torch.cuda.get_device_name(self.device)})"
+                                          if self.device.type == "cuda" else ""),
+            "mixed_precision": str(self.amp_dtype).replace("torch.", "") if self.amp_dtype else "off",
+            "torch_threads": torch.get_num_threads(),
+            "params": self.parameter_counts(),
+            "peak_memory_mib": round(peak_memory_mib(self.device), 1),
+            "peak_memory_kind": "cuda max_memory_allocated" if self.device.type == "cuda" else "process max RSS",
+            "objects": list(self.ds.objects),
+            "state_mode": cfg.model.state.mode,
+            "language": bool(self.language),
+            "normalization": self.norm.to_dict(),
+            "eval_psnr": eval_psnr,
+            "data": str(cfg.data),
+            "seed": cfg.seed,
+            "rays_per_step": cfg.train.batch_rays,
+        }
+        write_json(self.out / "run.json", run)
+        return run
