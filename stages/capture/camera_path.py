@@ -1,0 +1,84 @@
+"""Handheld-like camera paths: an orbit or a walk, plus smooth hand shake."""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .spec import CameraPathSpec, CaptureSpec
+
+WORLD_UP = np.array([0.0, 0.0, 1.0])
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = WORLD_UP) -> np.ndarray:
+    """OpenGL camera-to-world matrix at ``eye`` looking at ``target`` (camera -z towards the target)."""
+    back = np.asarray(eye, float) - np.asarray(target, float)
+    back /= np.linalg.norm(back)
+    right = np.cross(up, back)
+    if np.linalg.norm(right) < 1e-9:  # looking straight up or down: any right vector will do
+        right = np.array([1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, np.cross(back, right), back, eye
+    return m
+
+
+def seeded_rng(seed: int, label: str) -> np.random.Generator:
+    """An independent random stream per purpose, stable across Python runs (crc32, not hash())."""
+    return np.random.default_rng([int(seed), zlib.crc32(label.encode())])
+
+
+def shake(times_s: np.ndarray, amplitude: float, frequency_hz: float, rng: np.random.Generator) -> np.ndarray:
+    """``[n, 3]`` smooth pseudo-random offsets: three sinusoids per axis around ``frequency_hz``."""
+    out = np.zeros((len(times_s), 3))
+    if amplitude <= 0:
+        return out
+    for axis in range(3):
+        freqs = frequency_hz * rng.uniform(0.5, 1.8, size=3)
+        phases = rng.uniform(0, 2 * np.pi, size=3)
+        weights = rng.uniform(0.5, 1.0, size=3)
+        wave = sum(w * np.sin(2 * np.pi * f * times_s + p) for f, p, w in zip(freqs, phases, weights, strict=True))
+        out[:, axis] = amplitude * wave / weights.sum()
+    return out
+
+
+def _orbit_centres(path: CameraPathSpec, times_s: np.ndarray) -> np.ndarray:
+    az = np.deg2rad(path.start_deg + path.speed_deg_s * times_s)
+    tx, ty, _ = path.target
+    return np.stack([tx + path.radius * np.sin(az), ty - path.radius * np.cos(az),
+                     np.full_like(az, path.height)], axis=1)
+
+
+def _walk_centres(path: CameraPathSpec, times_s: np.ndarray) -> np.ndarray:
+    pts = np.asarray(path.waypoints, dtype=np.float64)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.clip(path.speed_m_s * times_s, 0.0, arc[-1])
+    return np.stack([np.interp(s, arc, pts[:, k]) for k in range(3)], axis=1)
+
+
+def camera_path(spec: CaptureSpec) -> np.ndarray:
+    """``[n_frames, 4, 4]`` camera-to-world poses (OpenGL axes) in metres."""
+    path = spec.camera
+    n = spec.video.n_frames
+    times_s = np.arange(n) / spec.video.fps
+    centres = _orbit_centres(path, times_s) if path.kind == "orbit" else _walk_centres(path, times_s)
+    if path.kind == "walk" and n > 2:
+        # corners of the polyline would jerk the camera; a short moving average rounds them
+        k = max(1, min(5, n // 8))
+        padded = np.concatenate([np.repeat(centres[:1], k, 0), centres, np.repeat(centres[-1:], k, 0)])
+        kernel = np.ones(2 * k + 1) / (2 * k + 1)
+        centres = np.stack([np.convolve(padded[:, a], kernel, mode="valid") for a in range(3)], axis=1)
+    rng = seeded_rng(spec.seed, "camera-shake")
+    j = path.jitter
+    centres = centres + shake(times_s, j.position, j.frequency_hz, rng)
+    angles = shake(times_s, np.deg2rad(j.rotation_deg), j.frequency_hz, rng)
+    target = np.asarray(path.target, dtype=np.float64)
+    poses = np.empty((n, 4, 4))
+    for i in range(n):
+        pose = look_at(centres[i], target)
+        pose[:3, :3] = pose[:3, :3] @ Rotation.from_rotvec(angles[i]).as_matrix()
+        poses[i] = pose
+    return poses

@@ -1,0 +1,377 @@
+"""The scene spec of a synthetic capture: a room, furniture, articulated objects, a camera path.
+
+A spec is YAML that maps one to one onto the dataclasses below. Geometry is
+written in metres; ``units.per_metre`` scales every output coordinate (poses,
+depth, scene box) so a capture can live in millimetres without the spec
+changing. World axes: z up, floor at z = 0, the room centred on x = y = 0.
+
+Time in state schedules is the fraction of the capture (0 = first frame,
+1 = last frame), so a schedule keeps its meaning when the frame count changes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from stages.scene import InputError
+
+OBJECT_KINDS = ("door", "drawer", "lid")
+HINGES = {"door": ("left", "right", "top", "bottom"), "lid": ("back",), "drawer": ("front",)}
+INTERPOLATIONS = ("smooth", "linear", "step")
+CAMERA_KINDS = ("orbit", "walk")
+MASK_SCOPES = ("object", "moving")
+
+
+class CaptureSpecError(InputError):
+    """A capture spec that cannot be rendered."""
+
+
+@dataclass
+class Units:
+    """Output units of the capture."""
+
+    name: str = "m"
+    """Unit name written to scene.json (m, mm, ...)."""
+    per_metre: float = 1.0
+    """Output units per metre of the spec (1000 = millimetres)."""
+
+
+@dataclass
+class VideoSpec:
+    """Resolution, timing and lens of the rendered video."""
+
+    width: int = 320
+    """Image width, pixels."""
+    height: int = 240
+    """Image height, pixels."""
+    fps: float = 10.0
+    """Frames per second of video.mp4; schedules and camera speed are in seconds through it."""
+    n_frames: int = 80
+    """Number of video frames."""
+    fov_deg: float = 65.0
+    """Horizontal field of view, degrees (square pixels, centred principal point)."""
+
+
+@dataclass
+class LightSpec:
+    """A point light."""
+
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0, 2.4])
+    """Light position, metres."""
+    intensity: float = 0.7
+    """Diffuse intensity (albedo x intensity x cos at full exposure)."""
+    shadows: bool = True
+    """Cast shadow rays towards this light."""
+
+
+@dataclass
+class RenderSpec:
+    """Shading and texture settings."""
+
+    ambient: float = 0.35
+    """Ambient light level (fraction of albedo seen in full shadow)."""
+    lights: list[LightSpec] = field(default_factory=lambda: [LightSpec()])
+    """Point lights (at least one)."""
+    shadows: bool = True
+    """Master switch for shadow rays (per-light ``shadows`` also applies)."""
+    supersample: int = 1
+    """Rays per pixel side (2 = 4 rays per pixel, box-filtered) for anti-aliasing."""
+    texels_per_metre: float = 100.0
+    """Texture resolution on surfaces; 100 = 1 cm texels."""
+    texture_size: int = 512
+    """Side of each procedural texture in texels (period = size / texels_per_metre metres)."""
+    contrast: float = 0.3
+    """Relative amplitude of the texture pattern around each surface's base colour."""
+
+
+@dataclass
+class FurnitureSpec:
+    """A static box (table, shelf, sofa block); part of the background."""
+
+    name: str
+    """Name (only for textures and debugging; furniture is background in the masks)."""
+    position: list[float]
+    """Centre of the footprint at the bottom face [x, y, z_bottom], metres."""
+    size: list[float]
+    """[width (x), depth (y), height (z)], metres, before yaw."""
+    yaw_deg: float = 0.0
+    """Rotation about the vertical axis, degrees."""
+    color: list[float] | None = None
+    """Base colour RGB in [0, 1]; None = drawn from the seed."""
+
+
+@dataclass
+class ScheduleSpec:
+    """State (0 closed .. 1 open) of one object over the capture."""
+
+    keys: list[list[float]] = field(default_factory=lambda: [[0.0, 0.0], [1.0, 0.0]])
+    """[[time fraction in 0..1, state], ...], time increasing; held constant outside."""
+    interpolation: str = "smooth"
+    """smooth (eased, zero speed at keys), linear, or step (jump at each key)."""
+
+
+@dataclass
+class ObjectSpec:
+    """An articulated object: a static carcass and one moving part."""
+
+    name: str
+    """Unique name, used in mapping.yaml, key frames and prompts."""
+    kind: str
+    """door (revolute, vertical or horizontal hinge), drawer (prismatic) or lid (hinge on the back top edge)."""
+    position: list[float]
+    """Centre of the footprint at the bottom face [x, y, z_bottom], metres; the front faces -y before yaw."""
+    size: list[float]
+    """[width, depth, height] of the carcass, metres."""
+    yaw_deg: float = 0.0
+    """Rotation about the vertical axis, degrees (0 = front faces -y)."""
+    hinge: str | None = None
+    """door: left, right, top or bottom edge of the front; lid: back; drawer: front. None = the first."""
+    limits: list[float] | None = None
+    """Joint range [closed, open]: degrees for door/lid, metres for drawer; None = a kind default."""
+    thickness: float = 0.02
+    """Panel thickness, metres (thin objects use less)."""
+    synonyms: list[str] = field(default_factory=list)
+    """Other names a person may use for it."""
+    description: str = ""
+    """One sentence describing the object, for prompts.yaml."""
+    schedule: ScheduleSpec = field(default_factory=ScheduleSpec)
+    """State over time."""
+    color: list[float] | None = None
+    """Carcass base colour RGB in [0, 1]; None = drawn from the seed."""
+    front_color: list[float] | None = None
+    """Moving part base colour RGB; None = drawn from the seed."""
+
+
+@dataclass
+class JitterSpec:
+    """Smooth hand shake added to the camera path."""
+
+    position: float = 0.02
+    """Amplitude of the positional shake, metres."""
+    rotation_deg: float = 0.8
+    """Amplitude of the rotational shake, degrees."""
+    frequency_hz: float = 0.6
+    """Typical shake frequency, Hz (a sum of three sinusoids around it)."""
+
+
+@dataclass
+class CameraPathSpec:
+    """A handheld-like camera path."""
+
+    kind: str = "orbit"
+    """orbit (arc around a target) or walk (through waypoints, looking at a target)."""
+    target: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.6])
+    """Point looked at, metres."""
+    radius: float = 2.0
+    """orbit: horizontal distance from the target, metres."""
+    height: float = 1.4
+    """orbit: camera height above the floor, metres."""
+    start_deg: float = -40.0
+    """orbit: azimuth at the first frame, degrees; 0 = camera on the -y side of the target."""
+    speed_deg_s: float = 10.0
+    """orbit: angular speed, degrees per second (negative = clockwise)."""
+    waypoints: list[list[float]] = field(default_factory=list)
+    """walk: camera positions to pass through, metres."""
+    speed_m_s: float = 0.3
+    """walk: speed along the waypoints, metres per second (stops at the last)."""
+    jitter: JitterSpec = field(default_factory=JitterSpec)
+    """Hand shake."""
+
+
+@dataclass
+class KeyFrameSpec:
+    """How densely the sparse key-frame states are annotated."""
+
+    every: int = 8
+    """Annotate every n-th video frame (starting at frame 0)."""
+    include_last: bool = True
+    """Also annotate the last frame."""
+    noise_std: float = 0.0
+    """Standard deviation of Gaussian annotation noise (state units), clipped to [0, 1]."""
+    decimals: int = 3
+    """Values are rounded to this many decimals, like a person typing them."""
+
+
+@dataclass
+class CaptureSpec:
+    """Everything needed to render a capture deterministically."""
+
+    name: str
+    """Capture name (written to capture.json)."""
+    room: list[float] = field(default_factory=lambda: [5.0, 4.0, 2.6])
+    """Room interior [x, y, z] size, metres; floor at z = 0, centred on x = y = 0."""
+    objects: list[ObjectSpec] = field(default_factory=list)
+    """Articulated objects; mapping.yaml id k = position k in this list (1-based)."""
+    furniture: list[FurnitureSpec] = field(default_factory=list)
+    """Static boxes."""
+    camera: CameraPathSpec = field(default_factory=CameraPathSpec)
+    """Camera path."""
+    video: VideoSpec = field(default_factory=VideoSpec)
+    """Resolution and timing."""
+    render: RenderSpec = field(default_factory=RenderSpec)
+    """Shading."""
+    key_frames: KeyFrameSpec = field(default_factory=KeyFrameSpec)
+    """Sparse state annotation."""
+    units: Units = field(default_factory=Units)
+    """Output units."""
+    mask_scope: str = "object"
+    """object: carcass + moving part carry the object's id; moving: only the moving part."""
+    seed: int = 0
+    """Seed of every random choice (textures, colours, jitter, annotation noise)."""
+    write_truth_images: bool = True
+    """Also write lossless PNG frames to truth/images (the video is lossy)."""
+
+    @property
+    def object_names(self) -> list[str]:
+        return [o.name for o in self.objects]
+
+
+def _build(cls: type, data: Any, path: Path, where: str) -> Any:
+    """Instantiate dataclass ``cls`` from a mapping, recursing into nested dataclass fields."""
+    if not isinstance(data, dict):
+        raise CaptureSpecError(path, f"{where} is {type(data).__name__}, expected a mapping",
+                               f"write {where} as key: value pairs")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise CaptureSpecError(path, f"{where} has unknown keys {unknown}",
+                               f"use only {sorted(fields)} (see stages/capture/spec.py)")
+    kwargs = {}
+    nested = {"lights": LightSpec, "objects": ObjectSpec, "furniture": FurnitureSpec}
+    for key, value in data.items():
+        ftype = fields[key].type
+        sub = f"{where}.{key}"
+        target = _NESTED.get(ftype) if isinstance(ftype, str) else None
+        if target is not None:
+            value = _build(target, value, path, sub)
+        elif key in nested and isinstance(value, list):
+            value = [_build(nested[key], v, path, f"{sub}[{i}]") for i, v in enumerate(value)]
+        kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise CaptureSpecError(path, f"{where}: {exc}", "add the missing required keys") from exc
+
+
+_NESTED = {
+    "Units": Units,
+    "VideoSpec": VideoSpec,
+    "RenderSpec": RenderSpec,
+    "ScheduleSpec": ScheduleSpec,
+    "JitterSpec": JitterSpec,
+    "CameraPathSpec": CameraPathSpec,
+    "KeyFrameSpec": KeyFrameSpec,
+}
+
+
+def spec_from_dict(data: dict[str, Any], path: str | Path = "<spec>") -> CaptureSpec:
+    """Build and validate a spec from parsed YAML."""
+    path = Path(path)
+    spec = _build(CaptureSpec, data, path, "spec")
+    validate_spec(spec, path)
+    return spec
+
+
+def load_spec(path: str | Path) -> CaptureSpec:
+    """Read a spec YAML file; errors name the file, the key and the fix."""
+    path = Path(path)
+    if not path.is_file():
+        raise CaptureSpecError(path, "spec file not found", "pass a YAML file such as config/captures/demo.yaml")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise CaptureSpecError(path, f"not valid YAML ({exc})", "repair the file") from exc
+    if not isinstance(data, dict):
+        raise CaptureSpecError(path, "top level is not a mapping", "write name:, room:, objects:, camera:, ...")
+    data.setdefault("name", path.stem)
+    return spec_from_dict(data, path)
+
+
+def spec_to_dict(spec: CaptureSpec) -> dict[str, Any]:
+    """Plain data (YAML-serialisable) of a spec; ``spec_from_dict`` inverts it."""
+    return dataclasses.asdict(spec)
+
+
+def _vec(value: Any, n: int, path: Path, where: str, positive: bool = False) -> None:
+    ok = isinstance(value, list | tuple) and len(value) == n and all(isinstance(v, int | float) for v in value)
+    if not ok:
+        raise CaptureSpecError(path, f"{where} is {value!r}, expected {n} numbers", f"write {where}: [{n} numbers]")
+    if positive and any(v <= 0 for v in value):
+        raise CaptureSpecError(path, f"{where} is {value!r}, all values must be > 0", "use positive sizes")
+
+
+def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
+    """Reject specs that cannot be rendered, naming the key and the fix."""
+    path = Path(path)
+    v = spec.video
+    if v.width < 8 or v.height < 8 or v.n_frames < 1 or v.fps <= 0 or not 1 < v.fov_deg < 170:
+        raise CaptureSpecError(path, f"video {dataclasses.asdict(v)} is out of range",
+                               "use width, height >= 8, n_frames >= 1, fps > 0, 1 < fov_deg < 170")
+    _vec(spec.room, 3, path, "room", positive=True)
+    if spec.units.per_metre <= 0:
+        raise CaptureSpecError(path, "units.per_metre must be > 0", "write 1 for metres, 1000 for millimetres")
+    if spec.render.supersample < 1 or spec.render.texture_size < 16 or spec.render.texels_per_metre <= 0:
+        raise CaptureSpecError(path, "render.supersample >= 1, texture_size >= 16, texels_per_metre > 0 needed",
+                               "fix the render section")
+    if not spec.render.lights:
+        raise CaptureSpecError(path, "render.lights is empty", "add at least one light")
+    for i, light in enumerate(spec.render.lights):
+        _vec(light.position, 3, path, f"render.lights[{i}].position")
+    if spec.mask_scope not in MASK_SCOPES:
+        raise CaptureSpecError(path, f"mask_scope {spec.mask_scope!r} unknown", f"use one of {MASK_SCOPES}")
+    if len(spec.objects) > 254:
+        raise CaptureSpecError(path, "more than 254 objects do not fit uint8 id masks", "use fewer objects")
+    names = spec.object_names
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise CaptureSpecError(path, f"object names {dupes} appear more than once", "give each object a unique name")
+    for i, o in enumerate(spec.objects):
+        where = f"objects[{i}] ({o.name})"
+        if o.kind not in OBJECT_KINDS:
+            raise CaptureSpecError(path, f"{where}: kind {o.kind!r} unknown", f"use one of {OBJECT_KINDS}")
+        if o.hinge is not None and o.hinge not in HINGES[o.kind]:
+            raise CaptureSpecError(path, f"{where}: hinge {o.hinge!r} is not valid for a {o.kind}",
+                                   f"use one of {HINGES[o.kind]}")
+        _vec(o.position, 3, path, f"{where}.position")
+        _vec(o.size, 3, path, f"{where}.size", positive=True)
+        if o.limits is not None:
+            _vec(o.limits, 2, path, f"{where}.limits")
+        if not 0 < o.thickness < 0.5 * min(o.size):
+            raise CaptureSpecError(path, f"{where}: thickness {o.thickness} must be > 0 and < half the smallest size",
+                                   "use a panel thickness of a few centimetres")
+        keys = o.schedule.keys
+        if o.schedule.interpolation not in INTERPOLATIONS:
+            raise CaptureSpecError(path, f"{where}: schedule.interpolation {o.schedule.interpolation!r} unknown",
+                                   f"use one of {INTERPOLATIONS}")
+        if not keys or any(not isinstance(k, list | tuple) or len(k) != 2 for k in keys):
+            raise CaptureSpecError(path, f"{where}: schedule.keys must be a list of [time, state] pairs",
+                                   "write keys: [[0.0, 0.0], [0.5, 1.0], ...]")
+        times = [float(k[0]) for k in keys]
+        if any(b < a for a, b in itertools.pairwise(times)):
+            raise CaptureSpecError(path, f"{where}: schedule times {times} are not increasing",
+                                   "sort the keys by time")
+        if any(not 0.0 <= float(k[1]) <= 1.0 for k in keys):
+            raise CaptureSpecError(path, f"{where}: schedule states must lie in [0, 1]",
+                                   "0 = closed, 1 = open; put the joint range in limits")
+    for i, f in enumerate(spec.furniture):
+        _vec(f.position, 3, path, f"furniture[{i}].position")
+        _vec(f.size, 3, path, f"furniture[{i}].size", positive=True)
+    c = spec.camera
+    if c.kind not in CAMERA_KINDS:
+        raise CaptureSpecError(path, f"camera.kind {c.kind!r} unknown", f"use one of {CAMERA_KINDS}")
+    _vec(c.target, 3, path, "camera.target")
+    if c.kind == "walk":
+        if len(c.waypoints) < 2:
+            raise CaptureSpecError(path, "camera.kind walk needs at least 2 waypoints", "add camera.waypoints")
+        for i, w in enumerate(c.waypoints):
+            _vec(w, 3, path, f"camera.waypoints[{i}]")
+    elif c.radius <= 0:
+        raise CaptureSpecError(path, "camera.radius must be > 0", "give the orbit radius in metres")
+    if spec.key_frames.every < 1 or spec.key_frames.noise_std < 0:
+        raise CaptureSpecError(path, "key_frames.every >= 1 and noise_std >= 0 needed", "fix key_frames")

@@ -1,0 +1,72 @@
+"""K-Planes interpolation against hand-computed values; initialisation; SH; 1D grid."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from stages.model.encodings import Grid1DEncoding, KPlanesEncoding, MultiScaleKPlanes, SHEncoding, all_pairs
+
+
+def test_single_plane_bilinear_matches_hand_computation():
+    enc = KPlanesEncoding([3, 3], channels=1, pairs=[(0, 1)], spatial_dims=2)
+    # plane[row = y index, col = x index]; vertices at -1, 0, 1 (align_corners)
+    values = torch.tensor([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]])
+    with torch.no_grad():
+        enc.planes[0].copy_(values.view(1, 1, 3, 3))
+    # x = 0.5 -> column 1.5, y = -0.5 -> row 0.5: bilinear of 2, 3, 5, 6 at (0.5, 0.5) = 4.0
+    out = enc(torch.tensor([[0.5, -0.5]]))
+    assert out.shape == (1, 1)
+    assert out.item() == pytest.approx(4.0)
+    # corner and centre vertices are returned exactly
+    assert enc(torch.tensor([[-1.0, -1.0], [0.0, 0.0], [1.0, 1.0]]))[:, 0].tolist() == pytest.approx([1, 5, 9])
+
+
+def test_product_over_planes_and_non_spatial_init():
+    enc = KPlanesEncoding([4, 4, 4, 5], channels=3, spatial_dims=3, init_range=(0.1, 0.5))
+    assert enc.pairs == all_pairs(4) and len(enc.pairs) == 6
+    # planes xk, yk, zk start at 1; spatial planes uniform in [0.1, 0.5]
+    assert enc.k_plane_indices == [2, 4, 5]
+    for i, p in enumerate(enc.planes):
+        if i in enc.k_plane_indices:
+            assert torch.all(p == 1)
+        else:
+            assert p.min() >= 0.1 and p.max() <= 0.5
+    with torch.no_grad():
+        for i, p in enumerate(enc.planes):
+            p.fill_(float(i + 1))  # constant planes: the feature is the product 1*2*...*6 = 720
+    assert torch.allclose(enc(torch.rand(7, 4) * 2 - 1), torch.full((7, 3), 720.0))
+
+
+def test_multiscale_concatenates_and_keeps_k_resolution():
+    enc = MultiScaleKPlanes([8, 8, 8, 6], channels=4, scales=[1, 2])
+    assert enc.out_dim == 8
+    assert enc(torch.zeros(5, 4)).shape == (5, 8)
+    fine = enc.grids[1]
+    assert fine.resolution == [16, 16, 16, 6]
+    # an xk plane is stored [1, C, res_k, res_x]
+    assert tuple(fine.planes[2].shape) == (1, 4, 6, 16)
+
+
+def test_sh_encoding_known_values_and_orthonormality():
+    sh = SHEncoding(4)
+    up = sh(torch.tensor([[0.0, 0.0, 1.0]]))[0]
+    assert up[0].item() == pytest.approx(0.5 / math.sqrt(math.pi))
+    assert up[2].item() == pytest.approx(0.48860251190291987)
+    assert up[1].item() == 0 and up[3].item() == 0
+    # Monte-Carlo orthonormality over the sphere: E[Y Y^T] * 4 pi = I
+    g = torch.Generator().manual_seed(0)
+    d = torch.nn.functional.normalize(torch.randn(200000, 3, generator=g), dim=-1)
+    y = sh(d)
+    gram = (y.T @ y) / d.shape[0] * 4 * math.pi
+    assert torch.allclose(gram, torch.eye(16), atol=0.03)
+
+
+def test_grid1d_interpolates_linearly():
+    g = Grid1DEncoding(resolution=4, channels=1)
+    with torch.no_grad():
+        g.values.copy_(torch.tensor([[0.0], [1.0], [4.0], [9.0], [16.0]]))
+    out = g(torch.tensor([0.0, 0.125, 0.5, 1.0]))[:, 0]
+    assert out.tolist() == pytest.approx([0.0, 0.5, 4.0, 16.0])

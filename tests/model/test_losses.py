@@ -1,0 +1,117 @@
+"""Each loss term is zero (or minimal) exactly where it should be, and positive otherwise."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from stages.model import losses as L
+from stages.model.encodings import KPlanesEncoding, MultiScaleKPlanes
+from stages.model.ray_samplers import RaySamples, pdf_samples, uniform_samples
+
+
+def test_rgb_loss():
+    x = torch.rand(10, 3)
+    assert L.rgb_loss(x, x).item() == 0
+    assert L.rgb_loss(x, x + 0.1).item() == pytest.approx(0.01, rel=1e-4)
+
+
+def test_interlevel_zero_when_proposal_bounds_final_weights():
+    bins = torch.linspace(0, 1, 9).expand(4, 9)
+    s = RaySamples(bins)
+    w = torch.softmax(torch.randn(4, 8), -1)
+    assert L.interlevel_loss([(s, w)], (s, w)).item() == pytest.approx(0.0, abs=1e-7)
+    assert L.interlevel_loss([(s, w * 2)], (s, w)).item() == pytest.approx(0.0, abs=1e-7)
+    assert L.interlevel_loss([(s, w * 0.5)], (s, w)).item() > 1e-3
+    # a coarse proposal whose single bin holds all the mass bounds any final histogram inside it
+    coarse = RaySamples(torch.tensor([[0.0, 1.0]]).expand(4, 2))
+    assert L.interlevel_loss([(coarse, torch.ones(4, 1))], (s, w)).item() == pytest.approx(0.0, abs=1e-7)
+
+
+def test_distortion_minimal_for_a_concentrated_ray():
+    bins = torch.linspace(0, 1, 33)[None]
+    nears, fars = torch.zeros(1), torch.ones(1)
+    spike = torch.zeros(1, 32)
+    spike[0, 10] = 1.0
+    spread = torch.full((1, 32), 1 / 32)
+    d_spike = L.distortion_loss(RaySamples(bins), spike, nears, fars).item()
+    d_spread = L.distortion_loss(RaySamples(bins), spread, nears, fars).item()
+    assert d_spike == pytest.approx((1 / 32) / 3, rel=1e-5)  # only the intra-interval term remains
+    assert d_spread > 5 * d_spike
+    # the O(S) form equals the quadratic definition
+    w = torch.rand(3, 32)
+    m = 0.5 * (bins[:, 1:] + bins[:, :-1])
+    quad = (w[:, :, None] * w[:, None, :] * (m[:, :, None] - m[:, None, :]).abs()).sum((1, 2))
+    quad = quad + (w**2 * (bins[:, 1:] - bins[:, :-1])).sum(-1) / 3
+    fast = L.distortion_loss(RaySamples(bins.expand(3, 33)), w, torch.zeros(3), torch.ones(3))
+    assert fast.item() == pytest.approx(quad.mean().item(), rel=1e-5)
+
+
+def test_plane_regularisers_zero_on_flat_planes_positive_otherwise():
+    enc = MultiScaleKPlanes([6, 6, 6, 5], channels=2, scales=[1, 2])
+    assert L.k_planes_l1(enc).item() == 0  # fresh k planes are exactly 1
+    assert L.k_smoothness(enc).item() == 0
+    assert L.plane_tv(enc).item() > 0  # random spatial planes
+    with torch.no_grad():
+        for g in enc.grids:
+            for p in g.planes:
+                p.fill_(0.3)
+    assert L.plane_tv(enc).item() == 0
+    assert L.k_planes_l1(enc).item() == pytest.approx(0.7)
+    # a k plane that is linear along k has no second difference, but TV along its spatial axis counts
+    g = KPlanesEncoding([4, 4, 4, 5], 1)
+    with torch.no_grad():
+        g.planes[2].copy_(torch.linspace(0, 1, 5).view(1, 1, 5, 1).expand(1, 1, 5, 4))
+    assert L.k_smoothness(g).item() == pytest.approx(0.0, abs=1e-12)
+    tv_before = L.plane_tv(g).item()
+    with torch.no_grad():
+        g.planes[2][..., 0] += 1.0  # a jump along x
+    assert L.plane_tv(g).item() > tv_before
+
+
+def test_focal_mask_loss():
+    labels = torch.tensor([0, 2, 1, -1])
+    sure = torch.full((4, 3), -20.0)
+    sure[torch.arange(3), labels[:3]] = 20.0
+    assert L.focal_mask_loss(sure, labels).item() == pytest.approx(0.0, abs=1e-12)
+    wrong = sure.roll(1, dims=1)
+    assert L.focal_mask_loss(wrong, labels).item() > 10
+    # the focal factor: with CE = c, loss = 0.5 (1 - e^-c)^1.5 c
+    uniform = torch.zeros(1, 3)
+    ce = torch.log(torch.tensor(3.0))
+    expect = 0.5 * (1 - torch.exp(-ce)) ** 1.5 * ce
+    assert L.focal_mask_loss(uniform, torch.tensor([1])).item() == pytest.approx(expect.item(), rel=1e-5)
+    assert L.focal_mask_loss(uniform, torch.tensor([-1])).item() == 0  # unlabelled rays are skipped
+
+
+def test_repulsion_loss():
+    labels = torch.tensor([0, 1, 1, 1])  # pairs (0, 1, differ) and (1, 1, same)
+    far = torch.tensor([[30.0, 0.0], [0.0, 0.0], [0.0, 30.0], [0.0, 0.0]])
+    assert L.repulsion_loss(far, labels, margin=10).item() == pytest.approx(0.0, abs=1e-6)
+    near = torch.zeros(4, 2)
+    assert L.repulsion_loss(near, labels, margin=10).item() == pytest.approx(11.0)  # ELU(10) + 1
+    assert L.repulsion_loss(near, torch.tensor([1, 0, 1, 0]), margin=10).item() == 0  # no differing pair
+
+
+def test_language_and_state_losses():
+    x = torch.nn.functional.normalize(torch.randn(6, 8), dim=-1)
+    valid = torch.tensor([True, True, False, True, True, True])
+    assert L.language_loss(x, x, valid).item() == 0
+    assert L.language_loss(x, -x, valid).item() > 0
+    target = torch.tensor([[0.2, float("nan")], [0.9, 0.1]])
+    pred = torch.tensor([[0.2, 0.7], [0.9, 0.1]])
+    assert L.state_loss(pred, target).item() == 0
+    assert L.state_loss(pred + 0.1, target).item() == pytest.approx(0.01, rel=1e-5)
+
+
+def test_samplers_bins_sorted_inside_ray_and_pdf_follows_weights():
+    nears, fars = torch.tensor([0.5, 1.0]), torch.tensor([2.0, 3.0])
+    g = torch.Generator().manual_seed(0)
+    s = uniform_samples(nears, fars, 16, jitter=True, generator=g)
+    assert torch.all(s.deltas >= 0)
+    assert torch.all(s.bins >= nears[:, None]) and torch.all(s.bins <= fars[:, None])
+    w = torch.zeros(2, 16)
+    w[:, 5] = 1.0
+    fine = pdf_samples(s, w, 32, jitter=False, padding=0.0)
+    inside = (fine.mids >= s.bins[:, 5:6]) & (fine.mids <= s.bins[:, 6:7])
+    assert inside.float().mean() > 0.9

@@ -1,0 +1,131 @@
+"""Trainer: resume is bit-exact on CPU, SIGTERM saves a checkpoint, non-finite steps are skipped, logs and run.json."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+
+import numpy as np
+import pytest
+import torch
+
+from stages.model import Trainer, TrainingDiverged, load_run
+from stages.model.train_cli import main as train_main
+
+
+def _weights(run_dir):
+    return torch.load(run_dir / "model.pt", weights_only=True)["state_dict"]
+
+
+def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_config):
+    straight = tmp_path / "straight"
+    Trainer(tiny_config(tiny_dataset.root, steps=5), straight, device="cpu", progress=False).train()
+
+    interrupted = tmp_path / "interrupted"
+    trainer = Trainer(tiny_config(tiny_dataset.root, steps=5), interrupted, device="cpu", progress=False)
+    original = trainer.train_step
+
+    def step_then_signal():
+        result = original()
+        if trainer.step == 1:  # during the 2nd step: a real SIGTERM arrives
+            os.kill(os.getpid(), signal.SIGTERM)
+        return result
+
+    trainer.train_step = step_then_signal
+    summary = trainer.train()
+    assert summary == {"status": "sigterm", "step": 2}
+    assert (interrupted / "checkpoints" / "step_000002.pt").is_file()
+    assert not (interrupted / "model.pt").exists()
+    with pytest.raises(Exception, match="--resume"):
+        Trainer(tiny_config(tiny_dataset.root, steps=5), interrupted, device="cpu", progress=False).train()
+
+    Trainer(tiny_config(tiny_dataset.root, steps=5), interrupted, device="cpu", progress=False, resume=True).train()
+    a, b = _weights(straight), _weights(interrupted)
+    assert a.keys() == b.keys()
+    for k in a:
+        torch.testing.assert_close(a[k], b[k], rtol=0, atol=0, equal_nan=True, msg=k)
+    with (interrupted / "train_log.csv").open() as fh:
+        steps = [int(r["step"]) for r in csv.DictReader(fh)]
+    assert steps == [1, 2, 3, 4, 5]
+
+
+def test_run_files_log_columns_and_run_json(trained_run):
+    run = json.loads((trained_run / "run.json").read_text())
+    assert run["steps"] == 4 and run["status"] == "completed" and run["device"] == "cpu"
+    assert run["params"]["total"] == sum(v for k, v in run["params"].items() if k != "total")
+    assert run["peak_memory_mib"] > 0 and run["train_seconds"] > 0
+    assert run["objects"] == ["object0", "object1", "object2"]
+    with (trained_run / "train_log.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 4
+    for col in ("wall_s", "step", "loss", "rgb", "interlevel", "distortion", "plane_tv", "focal_mask", "repulsion",
+                "l1_k_planes", "k_smoothness", "eval_psnr"):
+        assert col in rows[0]
+    assert rows[1]["eval_psnr"] and np.isfinite(float(rows[1]["eval_psnr"]))
+    assert float(rows[-1]["wall_s"]) >= float(rows[0]["wall_s"])
+    assert (trained_run / "config.yaml").is_file()
+
+
+def test_nonfinite_loss_skips_steps_then_stops_without_saving(tiny_dataset, tmp_path, monkeypatch, tiny_config):
+    cfg = tiny_config(tiny_dataset.root, "train.max_nonfinite=3", steps=10)
+    trainer = Trainer(cfg, tmp_path / "nan", device="cpu", progress=False)
+    before = {k: v.clone() for k, v in trainer.model.state_dict().items()}
+    real = trainer.model.loss_dict
+
+    def poisoned(*args, **kwargs):
+        terms = real(*args, **kwargs)
+        terms["rgb"] = terms["rgb"] * float("nan")
+        return terms
+
+    monkeypatch.setattr(trainer.model, "loss_dict", poisoned)
+    with pytest.raises(TrainingDiverged, match="rgb"):
+        trainer.train()
+    assert not list((tmp_path / "nan").glob("checkpoints/*.pt"))
+    for k, v in trainer.model.state_dict().items():  # skipped steps leave the weights untouched
+        torch.testing.assert_close(v, before[k], rtol=0, atol=0, equal_nan=True, msg=k)
+
+
+def test_learned_state_mode_supervises_key_frames(tiny_dataset, tmp_path, tiny_config):
+    out = tmp_path / "learned"
+    cfg = tiny_config(tiny_dataset.root, "model.state.mode=learned", steps=3)
+    Trainer(cfg, out, device="cpu", progress=False).train()
+    with (out / "train_log.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows[0]["state_mse"] and float(rows[0]["state_mse"]) > 0
+    run = load_run(out)
+    states = run.learned_states()
+    assert states.shape == (6, 3) and np.all((states > 0) & (states < 1))
+
+
+def test_language_targets_train_and_render(tiny_dataset, tmp_path, tiny_config):
+    rng = np.random.default_rng(0)
+    emb = rng.normal(size=(3, 2, 8)).astype(np.float32)
+    targets = tmp_path / "targets.npz"
+    np.savez(targets, objects=np.array(["object0", "object1", "object2"]), states=np.array([0.0, 1.0], np.float32),
+             embeddings=emb, background=rng.normal(size=8).astype(np.float32), encoder=np.array("fake"))
+    out = tmp_path / "lang"
+    cfg = tiny_config(tiny_dataset.root, steps=2)
+    cfg.language_targets = str(targets)
+    Trainer(cfg, out, device="cpu", progress=False).train()
+    with (out / "train_log.csv").open() as fh:
+        assert float(next(csv.DictReader(fh))["language"]) > 0
+    run = load_run(out)
+    img = run.render(tiny_dataset.camera, tiny_dataset.frames[0].c2w, None, frame_index=0)
+    assert img["language"].shape == (12, 16, 8)
+    assert np.allclose(np.linalg.norm(img["language"], axis=-1), 1.0, atol=1e-4)
+
+
+def test_train_cli_errors_and_success(tiny_dataset, tmp_path, capsys, tiny_overrides):
+    assert train_main(["--data", str(tmp_path / "missing"), "--out", str(tmp_path / "r")]) == 2
+    assert "error:" in capsys.readouterr().err
+    assert train_main(["--data", str(tiny_dataset.root), "--out", str(tmp_path / "r"), "--method", "nope"]) == 2
+    assert "nope" in capsys.readouterr().err
+    assert train_main(["--data", str(tiny_dataset.root), "--out", str(tmp_path / "r"), "--set", "bogus.x=1"]) == 2
+    args = ["--data", str(tiny_dataset.root), "--out", str(tmp_path / "ok"), "--max-steps", "2", "--no-progress",
+            "--device", "cpu", "--seed", "3"]
+    for item in tiny_overrides:
+        args += ["--set", item]
+    assert train_main(args) == 0
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["steps"] == 2
