@@ -8,19 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from stages.scene import Camera, Frame, SceneDataset, label_map_to_onehot, write_mask, write_scene
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> np.ndarray:
-    """OpenGL camera-to-world matrix looking from ``eye`` at ``target``."""
-    back = eye - target
-    back = back / np.linalg.norm(back)
-    right = np.cross(np.asarray(up, float), back)
-    right /= np.linalg.norm(right)
-    true_up = np.cross(back, right)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, true_up, back, eye
-    return m
+from stages.scene import Camera, Frame, SceneDataset, label_map_to_onehot, look_at, write_mask, write_scene
 
 
 def make_tiny_dataset(root: Path, n_frames: int = 6, n_objects: int = 3, width: int = 16, height: int = 12,

@@ -1,7 +1,7 @@
 """The scene dataset contract shared by every stage: layout, cameras, rays, validation."""
 
 from .atomic_io import atomic_dir, atomic_path, write_json, write_npy, write_text, write_yaml
-from .camera import Camera, generate_rays, opencv_to_opengl, opengl_to_opencv, project_points
+from .camera import Camera, generate_rays, look_at, opencv_to_opengl, opengl_to_opencv, project_points
 from .dataset import Frame, SceneDataset, read_scene, validate_scene, write_scene
 from .errors import InputError, SceneError
 from .keyframes import frame_id_of, read_key_frames, write_key_frames
@@ -12,6 +12,7 @@ from .normalization import (
     box_to_unit_transform,
 )
 from .splits import make_split
+from .yaml_io import read_yaml_mapping
 
 __all__ = [
     "Camera",
@@ -27,6 +28,7 @@ __all__ = [
     "frame_id_of",
     "generate_rays",
     "label_map_to_onehot",
+    "look_at",
     "make_split",
     "onehot_to_label_map",
     "opencv_to_opengl",
@@ -35,6 +37,7 @@ __all__ = [
     "read_key_frames",
     "read_mask",
     "read_scene",
+    "read_yaml_mapping",
     "validate_scene",
     "write_json",
     "write_key_frames",

@@ -132,3 +132,15 @@ def opengl_to_opencv(c2w: np.ndarray) -> np.ndarray:
 
 
 opencv_to_opengl = opengl_to_opencv  # the flip is its own inverse
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> np.ndarray:
+    """OpenGL camera-to-world matrix at ``eye`` looking at ``target`` (camera -z towards it, +y roughly ``up``)."""
+    eye = np.asarray(eye, dtype=np.float64)
+    back = eye - np.asarray(target, dtype=np.float64)
+    back /= np.linalg.norm(back)
+    right = np.cross(np.asarray(up, dtype=np.float64), back)
+    right /= np.linalg.norm(right)
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, np.cross(back, right), back, eye
+    return c2w

@@ -21,7 +21,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 
 from .atomic_io import write_json, write_yaml
 from .camera import Camera
@@ -29,6 +28,7 @@ from .errors import SceneError
 from .keyframes import frame_id_of, read_key_frames, write_key_frames
 from .masks import mask_path, read_mask
 from .transforms import camera_from_dict, camera_to_dict, load_json, parse_pose, resolve_image_path
+from .yaml_io import read_yaml_mapping
 
 
 @dataclass
@@ -126,12 +126,7 @@ class SceneDataset:
 def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
     if not path.is_file():
         return [], []
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise SceneError(path, f"not valid YAML ({exc})", "repair the file") from exc
-    if not isinstance(raw, dict):
-        raise SceneError(path, "top level is not a mapping", "write {int_id: object_name}")
+    raw = read_yaml_mapping(path, "{int_id: object_name}")
     items: list[tuple[int, str]] = []
     for k, v in raw.items():
         try:
@@ -209,10 +204,8 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
             if scene_box.shape != (2, 3) or not np.isfinite(scene_box).all() or (scene_box[1] <= scene_box[0]).any():
                 raise SceneError(spath, f"scene_box {scene_box.tolist()} is not [[min xyz], [max xyz]] with min < max",
                                  "re-estimate it with `livescene poses` or fix it by hand")
-    prompts: dict[str, dict[str, Any]] = {}
-    ppath = root / "prompts.yaml"
-    if ppath.is_file():
-        prompts = yaml.safe_load(ppath.read_text()) or {}
+    prompts: dict[str, dict[str, Any]] = read_yaml_mapping(
+        root / "prompts.yaml", "{name: {synonyms: [...], description: ...}}", missing_ok=True)
 
     key_frames = read_key_frames(root / "key_frame_value.yaml", objects or None)
     ds = SceneDataset(root=root, camera=camera, frames=frames, objects=objects, object_ids=object_ids,

@@ -5,10 +5,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import yaml
-
 from .atomic_io import write_yaml
 from .errors import SceneError
+from .yaml_io import read_yaml_mapping
 
 
 def frame_id_of(stem: str) -> str:
@@ -18,14 +17,7 @@ def frame_id_of(stem: str) -> str:
 
 def read_key_frames(path: Path, object_names: list[str] | None = None) -> dict[str, dict[str, float]]:
     """Key frames keyed on frame id; values checked finite and objects checked known."""
-    if not path.is_file():
-        return {}
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise SceneError(path, f"not valid YAML ({exc})", "repair the file") from exc
-    if not isinstance(raw, dict):
-        raise SceneError(path, "top level is not a mapping", "write {<name>_<fid>: {object: value}}")
+    raw = read_yaml_mapping(path, "{<name>_<fid>: {object: value}}", missing_ok=True)
     out: dict[str, dict[str, float]] = {}
     for key, values in raw.items():
         fid = frame_id_of(str(key))
