@@ -1,0 +1,41 @@
+"""``livescene labels``: ingest object masks (npy, PNG id maps, COCO, LabelMe) as canonical LiveScene masks."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from stages.scene.errors import InputError
+
+from .ingest import LabelsConfig, ingest_labels
+
+
+def build_parser(prog: str = "livescene labels") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description=__doc__)
+    p.add_argument("--input", required=True, type=Path,
+                   help="mask folder (masks/<fid>.npy, <name>_<fid>.png, LabelMe <fid>.json), a folder holding "
+                        "masks/, or a COCO / LabelMe .json file")
+    p.add_argument("--format", default="auto", choices=["auto", "npy", "png", "coco", "labelme"])
+    p.add_argument("--mapping", type=Path, default=None,
+                   help="name table {id: name}: LiveScene mapping.yaml or CoNeRF mapping.yml "
+                        "(default: found next to the input; COCO may use its categories instead)")
+    p.add_argument("--frames", required=True, type=Path, help="FRAMES folder (images/ + frames.csv)")
+    p.add_argument("--out", required=True, type=Path, help="LABELS folder to write")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    config = LabelsConfig(input=args.input, frames=args.frames, out=args.out, format=args.format,
+                          mapping=args.mapping, progress=not args.no_progress)
+    try:
+        summary = ingest_labels(config)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{args.out}: {summary['n_labelled']}/{summary['n_frames']} frames labelled ({summary['format']}), "
+          f"objects {summary['objects']}, {len(summary['frames_without_masks'])} without masks, "
+          f"{len(summary['unreliable_frames'])} unreliable (object under H*W/300 pixels)")
+    return 0

@@ -1,0 +1,69 @@
+"""The frames labels are ingested for: a FRAMES folder (``images/`` + ``frames.csv``) or a plain image folder."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import pandas as pd
+
+from stages.scene import frame_id_of
+
+from .errors import LabelError
+
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
+
+
+@dataclass(frozen=True)
+class FrameSet:
+    """Frame ids and the image size every mask must have."""
+
+    frame_ids: tuple[str, ...]
+    """Frame ids (last ``_`` token of the image stem) in frame order."""
+    height: int
+    """Image height in pixels."""
+    width: int
+    """Image width in pixels."""
+    root: Path
+    """The folder the images were listed from."""
+
+    def match(self, label_id: str) -> str | None:
+        """The frame a label's id refers to: same id, or same number when zero padding differs."""
+        if label_id in self._ids:
+            return label_id
+        if label_id.isdigit():
+            return self._by_number.get(int(label_id))
+        return None
+
+    @property
+    def _ids(self) -> set[str]:
+        return set(self.frame_ids)
+
+    @property
+    def _by_number(self) -> dict[int, str]:
+        return {int(f): f for f in self.frame_ids if f.isdigit()}
+
+
+def read_frame_set(frames_dir: str | Path) -> FrameSet:
+    """List the frames of a FRAMES folder; the size is read from its first image."""
+    frames_dir = Path(frames_dir)
+    image_dir = frames_dir / "images" if (frames_dir / "images").is_dir() else frames_dir
+    if not image_dir.is_dir():
+        raise LabelError(frames_dir, "frames folder not found", "pass the FRAMES folder of `livescene frames`")
+    csv = frames_dir / "frames.csv"
+    if csv.is_file():
+        table = pd.read_csv(csv)
+        if "frame" not in table.columns:
+            raise LabelError(csv, "no 'frame' column", "write frames.csv with `livescene frames`")
+        names = [str(n) for n in table["frame"]]
+    else:
+        names = sorted(p.name for p in image_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not names:
+        raise LabelError(image_dir, "no images (.png/.jpg) found", "extract frames with `livescene frames` first")
+    first = image_dir / names[0]
+    img = cv2.imread(str(first), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise LabelError(first, "image missing or unreadable", "re-extract the frames")
+    ids = tuple(frame_id_of(Path(n).stem) for n in names)
+    return FrameSet(frame_ids=ids, height=int(img.shape[0]), width=int(img.shape[1]), root=image_dir)

@@ -1,0 +1,192 @@
+"""Ingest a label set in any supported format into canonical LiveScene masks.
+
+Output (written atomically into ``out``)::
+
+    masks/<fid>.npy   bool H x W x (objects + 1), background last, frame size
+    mapping.yaml      {1: name, 2: name, ...} in canonical object order
+    labels.json       coverage per object per frame, frames without masks,
+                      unreliable frames (an object present on fewer than
+                      H*W/300 pixels: its mask is too small to trust)
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from tqdm import tqdm
+
+from stages.scene import atomic_dir, label_map_to_onehot, write_json, write_mask, write_yaml
+
+from .coco_labels import read_coco_labels
+from .errors import LabelError
+from .frame_set import read_frame_set
+from .label_set import LabelSet
+from .labelme_labels import is_labelme, read_labelme_labels
+from .name_table import NameTable, find_name_table, read_name_table
+from .npy_labels import read_npy_labels
+from .png_labels import read_png_labels
+from .resize import resize_labels
+
+LabelFormat = Literal["auto", "npy", "png", "coco", "labelme"]
+UNRELIABLE_DIVISOR = 300
+"""An object on fewer than H*W/300 pixels of a frame makes that frame's mask unreliable (METHOD.md)."""
+
+
+@dataclass
+class LabelsConfig:
+    """What `livescene labels` ingests and where it writes."""
+
+    input: Path
+    """Mask folder (npy, png, LabelMe json), a folder holding masks/, or a COCO / LabelMe .json file."""
+    frames: Path
+    """FRAMES folder (images/ + frames.csv) whose frame ids and size the masks must match."""
+    out: Path
+    """LABELS folder to write."""
+    format: LabelFormat = "auto"
+    """Source format; auto looks at the files."""
+    mapping: Path | None = None
+    """Name table {id: name} (mapping.yaml or CoNeRF mapping.yml); default: found next to the input."""
+    progress: bool = True
+    """Show a progress bar."""
+
+
+def detect_format(path: Path) -> tuple[str, Path]:
+    """(format, the file or folder holding the labels)."""
+    if path.is_file():
+        if path.suffix.lower() != ".json":
+            raise LabelError(path, "a single label file must be a COCO or LabelMe .json",
+                             "pass the folder of masks, or --format")
+        data = _peek_json(path)
+        if isinstance(data, dict) and "annotations" in data and "images" in data:
+            return "coco", path
+        if is_labelme(data):
+            return "labelme", path
+        raise LabelError(path, "neither COCO (images/annotations/categories) nor LabelMe (shapes)",
+                         "pass --format or convert the file")
+    if not path.is_dir():
+        raise LabelError(path, "label input not found", "pass a mask folder or a COCO/LabelMe json file")
+    folder = path / "masks" if (path / "masks").is_dir() and _has_labels(path / "masks") else path
+    counts = {ext: len(list(folder.glob(f"*.{ext}"))) for ext in ("npy", "png", "json")}
+    present = [ext for ext, n in counts.items() if n]
+    if len(present) != 1:
+        what = "no .npy, .png or .json masks" if not present else f"a mix of {', '.join(present)} files"
+        raise LabelError(folder, f"cannot tell the label format: {what}", "pass --format npy|png|coco|labelme")
+    ext = present[0]
+    if ext == "json":
+        jsons = sorted(folder.glob("*.json"))
+        if len(jsons) == 1 and not is_labelme(_peek_json(jsons[0])):
+            return "coco", jsons[0]
+        return "labelme", folder
+    return ext, folder
+
+
+def _has_labels(folder: Path) -> bool:
+    return any(folder.glob("*.npy")) or any(folder.glob("*.png")) or any(folder.glob("*.json"))
+
+
+def _peek_json(path: Path) -> object:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise LabelError(path, f"not readable JSON ({exc})", "repair or re-export the file") from exc
+
+
+def open_label_set(config: LabelsConfig) -> LabelSet:
+    """Read the source's name table and list its labelled frames (nothing rasterised yet)."""
+    fmt, where = detect_format(config.input) if config.format == "auto" else (config.format, config.input)
+    if fmt == "coco" and where.is_dir():
+        jsons = sorted(where.glob("*.json"))
+        if len(jsons) != 1:
+            raise LabelError(where, f"{len(jsons)} .json files; COCO needs exactly one", "pass the COCO file itself")
+        where = jsons[0]
+    if where.is_dir() and (where / "masks").is_dir() and _has_labels(where / "masks"):
+        where = where / "masks"
+    folder = where if where.is_dir() else where.parent
+    table_path = config.mapping or find_name_table([folder, folder.parent])
+    table: NameTable | None = read_name_table(table_path) if table_path is not None else None
+    if fmt in ("npy", "png"):
+        if table is None:
+            raise LabelError(folder, f"{fmt} masks carry no object names and no mapping.yaml / mapping.yml was found "
+                             "next to them", "pass --mapping mapping.yaml ({id: name})")
+        return read_npy_labels(where, table) if fmt == "npy" else read_png_labels(where, table)
+    if fmt == "coco":
+        return read_coco_labels(where, table)
+    if fmt == "labelme":
+        files = [where] if where.is_file() else sorted(where.glob("*.json"))
+        if not files:
+            raise LabelError(where, "no LabelMe .json files", "save the annotations with LabelMe into this folder")
+        return read_labelme_labels(files, table)
+    raise LabelError(config.input, f"unknown format {fmt!r}", "use auto, npy, png, coco or labelme")
+
+
+def ingest_labels(config: LabelsConfig) -> dict:
+    """Ingest, write LABELS atomically and return the labels.json summary."""
+    frames = read_frame_set(config.frames)
+    label_set = open_label_set(config)
+    if not label_set.names:
+        raise LabelError(config.input, "the label set names no objects", "add at least one object")
+    matched: dict[str, str] = {}
+    unmatched: list[str] = []
+    for entry in label_set.entries:
+        fid = frames.match(entry.label_id)
+        if fid is None:
+            unmatched.append(entry.source)
+            continue
+        if fid in matched:
+            raise LabelError(entry.source, f"frame {fid} is labelled twice (also by {matched[fid]})",
+                             "keep one annotation per frame")
+        matched[fid] = entry.source
+    if not matched:
+        raise LabelError(config.input, f"none of the {len(label_set.entries)} labelled frames matches a frame of "
+                         f"{frames.root} (ids like {frames.frame_ids[:3]})",
+                         "label the extracted frames; names must end in the frame's source index")
+    by_source = {e.source: e for e in label_set.entries}
+    names = list(label_set.names)
+    h, w = frames.height, frames.width
+    min_pixels = h * w / UNRELIABLE_DIVISOR
+    per_frame: dict[str, dict] = {}
+    unreliable: dict[str, list[str]] = {}
+    overlaps: dict[str, int] = {}
+    src_sizes: set[tuple[int, int]] = set()
+    with atomic_dir(config.out) as tmp:
+        order = [f for f in frames.frame_ids if f in matched]
+        for fid in tqdm(order, desc="labels", unit="frame", disable=not config.progress):
+            entry = by_source[matched[fid]]
+            label_map = entry.load()
+            src_sizes.add(label_map.labels.shape[:2])
+            labels = resize_labels(label_map.labels, (h, w), entry.source).astype(np.int64)
+            write_mask(tmp, fid, label_map_to_onehot(labels - 1, len(names)))
+            pixels = np.bincount(labels.ravel(), minlength=len(names) + 1)[1:]
+            per_frame[fid] = {"pixels": {n: int(p) for n, p in zip(names, pixels, strict=True)},
+                              "coverage": {n: round(float(p) / (h * w), 6) for n, p in zip(names, pixels, strict=True)}}
+            small = [n for n, p in zip(names, pixels, strict=True) if 0 < p < min_pixels]
+            if small:
+                unreliable[fid] = small
+            if label_map.overlap_pixels:
+                overlaps[fid] = label_map.overlap_pixels
+        write_yaml(tmp / "mapping.yaml", {k + 1: n for k, n in enumerate(names)})
+        summary = {
+            "format": label_set.format,
+            "input": str(config.input),
+            "names_from": label_set.names_from,
+            "source_ids": list(label_set.source_ids),
+            "objects": names,
+            "height": h,
+            "width": w,
+            "source_sizes": sorted([sw, sh] for sh, sw in src_sizes),
+            "n_frames": len(frames.frame_ids),
+            "n_labelled": len(order),
+            "min_reliable_pixels": min_pixels,
+            "unreliable_rule": f"an object present on fewer than H*W/{UNRELIABLE_DIVISOR} pixels",
+            "frames_without_masks": [f for f in frames.frame_ids if f not in matched],
+            "unreliable_frames": unreliable,
+            "overlap_pixels": overlaps,
+            "labels_without_frame": unmatched,
+            "frames": per_frame,
+        }
+        write_json(tmp / "labels.json", summary)
+    return summary

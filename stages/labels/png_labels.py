@@ -1,0 +1,51 @@
+"""PNG id maps: one image per frame, pixel value 0 = background, k = the object whose id is k in the name table."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from stages.scene import frame_id_of
+
+from .errors import LabelError
+from .label_set import LabelEntry, LabelMap, LabelSet
+from .name_table import NameTable
+
+
+def read_png_labels(folder: Path, table: NameTable) -> LabelSet:
+    if 0 in table.ids:
+        raise LabelError(table.path or folder, "id 0 names an object, but 0 is background in a PNG id map",
+                         "number the objects from 1 (their pixel values)")
+    files = sorted(folder.glob("*.png"))
+    lut = np.zeros(max(max(table.ids) + 1, 65536), dtype=np.uint16)
+    known = np.zeros(lut.size, dtype=bool)
+    known[0] = True
+    for ident, index in table.index_of_id().items():
+        if ident < 0:
+            raise LabelError(table.path or folder, f"id {ident} is negative", "use the pixel values 1..255 as ids")
+        lut[ident] = index
+        known[ident] = True
+    entries = [LabelEntry(frame_id_of(f.stem), str(f), _loader(f, lut, known, table)) for f in files]
+    return LabelSet("png", table.names, str(table.path), table.ids, entries)
+
+
+def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
+    def load() -> LabelMap:
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise LabelError(path, "image missing or unreadable", "re-export the id map as PNG")
+        if img.ndim == 3:
+            if not all(np.array_equal(img[..., 0], img[..., c]) for c in range(1, img.shape[2])):
+                raise LabelError(path, "id map has colour channels that differ",
+                                 "save a single-channel (grey) PNG whose values are the object ids")
+            img = img[..., 0]
+        values = np.unique(img)
+        unknown = [int(v) for v in values if not known[int(v)]]
+        if unknown:
+            raise LabelError(path, f"pixel values {unknown} are no id of {table.path}",
+                             f"add them to the name table or relabel those pixels (known ids {list(table.ids)})")
+        return LabelMap(lut[img].astype(np.uint16))
+
+    return load
