@@ -1,0 +1,111 @@
+"""The same 3-object label set in all four formats ingests to identical canonical masks."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from labelset_writers import HEIGHT, NAMES, WIDTH, write_coco, write_labelme, write_npy, write_png
+
+from stages.labels import LabelsConfig, decode_rle, encode_counts_string, encode_rle, ingest_labels
+from stages.labels.cli import main as labels_main
+from stages.scene import onehot_to_label_map
+
+
+def ingest(src: Path, frames: Path, out: Path, fmt: str = "auto", mapping: Path | None = None) -> dict:
+    return ingest_labels(LabelsConfig(input=src, frames=frames, out=out, format=fmt, mapping=mapping, progress=False))
+
+
+def read_masks(out: Path) -> dict[str, np.ndarray]:
+    return {p.stem: np.load(p) for p in sorted((out / "masks").glob("*.npy"))}
+
+
+def test_four_formats_give_identical_canonical_masks(label_files):
+    root, labels = label_files.root, label_files.labels
+    sources = {
+        "png": write_png(root, labels),
+        "npy": write_npy(root, labels),
+        "coco": write_coco(root, labels),
+        "labelme": write_labelme(root, labels),
+    }
+    results = {}
+    for fmt, src in sources.items():
+        summary = ingest(src, label_files.frames, root / f"out_{fmt}")
+        assert summary["format"] == fmt  # auto detection
+        assert summary["objects"] == list(NAMES)
+        results[fmt] = read_masks(root / f"out_{fmt}")
+        assert yaml.safe_load((root / f"out_{fmt}" / "mapping.yaml").read_text()) == {1: "door", 2: "drawer",
+                                                                                       3: "fridge"}
+    reference = results["png"]
+    assert sorted(reference) == ["00000", "00002", "00004"]
+    for fid, mask in reference.items():
+        assert mask.dtype == bool and mask.shape == (HEIGHT, WIDTH, 4)
+        assert (mask.sum(-1) == 1).all()
+        expected = np.where(labels[fid] == 0, 3, labels[fid].astype(np.int64) - 1)
+        np.testing.assert_array_equal(onehot_to_label_map(mask), expected)
+    for fmt, masks in results.items():
+        assert sorted(masks) == sorted(reference), fmt
+        for fid in reference:
+            np.testing.assert_array_equal(masks[fid], reference[fid], err_msg=f"{fmt} frame {fid}")
+
+
+def test_labels_json_reports_coverage_missing_and_unreliable_frames(label_files):
+    src = write_png(label_files.root, label_files.labels)
+    out = label_files.root / "out"
+    ingest(src, label_files.frames, out)
+    summary = json.loads((out / "labels.json").read_text())
+    assert summary["frames_without_masks"] == ["00006"]
+    assert summary["min_reliable_pixels"] == pytest.approx(HEIGHT * WIDTH / 300)
+    assert summary["unreliable_frames"] == {"00004": ["fridge"]}
+    for fid, lab in label_files.labels.items():
+        for k, name in enumerate(NAMES, start=1):
+            n = int((lab == k).sum())
+            assert summary["frames"][fid]["pixels"][name] == n
+            assert summary["frames"][fid]["coverage"][name] == pytest.approx(n / (HEIGHT * WIDTH), abs=1e-6)
+
+
+def test_integer_factor_resizes_nearest(label_files):
+    src = write_png(label_files.root, {f: lab[::2, ::2] for f, lab in label_files.labels.items()})
+    out = label_files.root / "out"
+    summary = ingest(src, label_files.frames, out)
+    assert summary["source_sizes"] == [[WIDTH // 2, HEIGHT // 2]]
+    small = label_files.labels["00000"][::2, ::2]
+    up = np.repeat(np.repeat(small, 2, 0), 2, 1).astype(np.int64)
+    np.testing.assert_array_equal(onehot_to_label_map(read_masks(out)["00000"]), np.where(up == 0, 3, up - 1))
+
+
+def test_downscale_by_integer_factor(label_files):
+    big = {f: np.repeat(np.repeat(lab, 3, 0), 3, 1) for f, lab in label_files.labels.items()}
+    out = label_files.root / "out"
+    ingest(write_png(label_files.root, big), label_files.frames, out)
+    lab = label_files.labels["00002"].astype(np.int64)
+    np.testing.assert_array_equal(onehot_to_label_map(read_masks(out)["00002"]), np.where(lab == 0, 3, lab - 1))
+
+
+def test_rle_round_trip_both_forms():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        mask = rng.random((7, 9)) < rng.random()
+        runs = encode_rle(mask)
+        assert sum(runs) == mask.size
+        np.testing.assert_array_equal(decode_rle(runs, 7, 9), mask)
+        np.testing.assert_array_equal(decode_rle(encode_counts_string(runs), 7, 9), mask)
+
+
+def test_rle_decoder_reads_a_known_coco_string():
+    # a 3x3 mask with the centre pixel set: runs [4, 1, 4] in column-major order -> "414"
+    assert encode_counts_string([4, 1, 4]) == "414"
+    mask = decode_rle("414", 3, 3)
+    assert mask.sum() == 1 and mask[1, 1]
+
+
+def test_cli_writes_and_reports(label_files, capsys):
+    src = write_png(label_files.root, label_files.labels)
+    out = label_files.root / "cli_out"
+    assert labels_main(["--input", str(src), "--frames", str(label_files.frames), "--out", str(out),
+                        "--format", "png", "--no-progress"]) == 0
+    assert "3/4 frames labelled" in capsys.readouterr().out
+    assert (out / "labels.json").is_file()
