@@ -39,7 +39,10 @@ def interpolate(key_x: np.ndarray, key_y: np.ndarray, x: np.ndarray, method: str
     if method == "linear":
         return np.interp(held, key_x, key_y)
     if method == "pchip":
-        out = PchipInterpolator(key_x, key_y, extrapolate=False)(held)
+        # SciPy's harmonic-mean slopes divide by secants; a subnormal secant overflows to a zero slope, which is
+        # the right limit, so the warning carries no information
+        with np.errstate(over="ignore", divide="ignore"):
+            out = PchipInterpolator(key_x, key_y, extrapolate=False)(held)
         # exact at the knots (the cubic's rounding could otherwise leave 1 ulp off a key value)
         at_knot = np.searchsorted(key_x, held)
         hit = (at_knot < key_x.size) & (key_x[np.minimum(at_knot, key_x.size - 1)] == held)

@@ -1,0 +1,127 @@
+"""Every bad key-frame input gets a message naming the file and the row."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from state_files import write_frames_csv, write_text
+
+from stages.states import StateError, StatesConfig, compute_states
+from stages.states.cli import main as states_main
+
+MAPPING = "1: door\n2: drawer\n"
+
+
+def run(tmp: Path, key_file: Path, **kw) -> dict:
+    frames = write_frames_csv(tmp / "frames.csv", list(range(0, 40, 2)))
+    return compute_states(StatesConfig(key_frames=key_file, frames=frames, out=tmp / "out", **kw))
+
+
+def test_nan_value_names_file_and_row(tmp_path):
+    keys = write_text(tmp_path / "key_frame_value.yaml", """
+frame_00000:
+  door: 0.0
+frame_00010:
+  door: .nan
+""")
+    with pytest.raises(StateError, match=r"key_frame_value\.yaml: row 4: frame 'frame_00010', object 'door': value is "
+                                         r"nan; fix: write a finite number"):
+        run(tmp_path, keys)
+    assert not (tmp_path / "out").exists()
+
+
+def test_infinite_value_in_csv(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,inf\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 3: frame '10', object 'door': value is inf"):
+        run(tmp_path, keys)
+
+
+def test_value_that_is_no_number(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,open\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 3: .*value 'open' is not a number"):
+        run(tmp_path, keys)
+
+
+def test_same_key_frame_with_two_values(tmp_path):
+    # two spellings of source frame 10 (zero padding differs), annotated differently
+    keys = write_text(tmp_path / "key_frame_value.yaml", """
+frame_00000:
+  door: 0.0
+frame_00010:
+  door: 1.0
+img_10:
+  door: 0.5
+""")
+    with pytest.raises(StateError, match=r"key_frame_value\.yaml: rows 4 and 6: key frame 10 of 'door' has two "
+                                         r"different values \(1\.0 and 0\.5\)"):
+        run(tmp_path, keys)
+
+
+def test_same_key_frame_twice_with_the_same_value_is_fine(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,1\nframe_00010.png,door,1\n")
+    assert run(tmp_path, keys)["n_key_frames"]["door"] == 2
+
+
+def test_key_frame_for_a_frame_that_was_not_extracted(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n15,door,1\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 3: key frame 15 \(door\) is a frame that does not exist in "
+                                         r".*frames\.csv \(source indices 0\.\.38\)"):
+        run(tmp_path, keys)
+    summary = run(tmp_path, keys, allow_missing_frames=True)  # opt-in: used for interpolation only
+    assert summary["n_key_frames"]["door"] == 2
+
+
+def test_object_never_annotated(tmp_path):
+    mapping = write_text(tmp_path / "mapping.yaml", MAPPING)
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,1\n")
+    with pytest.raises(StateError, match=r"keys\.csv: objects \['drawer'\] of .*mapping\.yaml are never annotated"):
+        run(tmp_path, keys, mapping=mapping)
+
+
+def test_unknown_object_name(tmp_path):
+    mapping = write_text(tmp_path / "mapping.yaml", MAPPING)
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n0,drawer,0\n10,sofa,1\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 4: unknown object 'sofa' \(objects of .*mapping\.yaml: "
+                                         r"\['door', 'drawer'\]\)"):
+        run(tmp_path, keys, mapping=mapping)
+
+
+def test_unknown_conerf_class(tmp_path):
+    write_text(tmp_path / "mapping.yml", "0: left eye\n")
+    keys = write_text(tmp_path / "annotations.yml", """
+- class: 0
+  frame: 0
+  value: -1
+- class: 3
+  frame: 10
+  value: 1
+""")
+    with pytest.raises(StateError, match=r"annotations\.yml: row 4: unknown object: class 3 is not in .*mapping\.yml"):
+        run(tmp_path, keys)
+
+
+def test_value_outside_a_fixed_range(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,95\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 3: value 95\.0 of 'door' lies outside the range "
+                                         r"\[0\.0, 90\.0\] \(--range\)"):
+        run(tmp_path, keys, ranges={"door": (0.0, 90.0)})
+
+
+def test_missing_frames_csv_and_bad_columns(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n")
+    with pytest.raises(StateError, match=r"nowhere\.csv: frames\.csv not found"):
+        compute_states(StatesConfig(key_frames=keys, frames=tmp_path / "nowhere.csv", out=tmp_path / "o"))
+    with pytest.raises(StateError, match=r"keys\.csv: row 1: header \['frame', 'thing', 'value'\] lacks"):
+        run(tmp_path, write_text(tmp_path / "keys.csv", "frame,thing,value\n0,door,0\n"))
+
+
+def test_cli_reports_error_and_exits_2(tmp_path, capsys):
+    frames = write_frames_csv(tmp_path / "frames.csv", [0, 1, 2])
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,nan\n")
+    code = states_main(["--key-frames", str(keys), "--frames", str(frames), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("error: ") and "row 2" in err and "value is nan" in err
+    code = states_main(["--key-frames", str(keys), "--frames", str(frames), "--out", str(tmp_path / "out"),
+                        "--range", "door=1,0"])
+    assert code == 2 and "'door=1,0' is not OBJECT=LO,HI" in capsys.readouterr().err
