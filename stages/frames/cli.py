@@ -1,0 +1,57 @@
+"""``livescene frames``: frames of a video (or image folder) with source index, timestamp and sharpness."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from stages.scene import InputError
+
+from .config import FramesConfig
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="livescene frames",
+        description="Extract frames from an OpenCV-readable video or an image folder into OUT/images/"
+                    "frame_<source index>.png, keeping the sharpest frame (variance of the Laplacian) of each "
+                    "window; writes frames.csv (frame, source_index, timestamp, sharpness) and frames.json.")
+    p.add_argument("--video", type=Path, required=True, help="video file, or a folder of frames in playback order")
+    p.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
+    pick = p.add_mutually_exclusive_group()
+    pick.add_argument("--count", type=int, help="keep this many frames (one per equal window of the source)")
+    pick.add_argument("--stride", type=int, help="keep one frame per window of this many source frames "
+                                                 "(default: every frame)")
+    p.add_argument("--downscale", type=int, nargs="+", default=[], metavar="F",
+                   help="also write images_F/ copies downscaled by each factor (e.g. --downscale 2 4)")
+    p.add_argument("--fps", type=float, help="frame rate of an image folder, for timestamps (videos carry their own)")
+    p.add_argument("--accept-truncated", action="store_true",
+                   help="keep the frames that decode when a video ends before its declared length")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.count is not None and args.count < 1:
+            raise InputError(Path("--count"), f"{args.count} frames requested", "give --count >= 1")
+        if args.stride is not None and args.stride < 1:
+            raise InputError(Path("--stride"), f"stride {args.stride}", "give --stride >= 1")
+        if any(f < 2 for f in args.downscale):
+            raise InputError(Path("--downscale"), f"factors {args.downscale}", "give integer factors >= 2, e.g. 2 4")
+        if args.fps is not None and not args.fps > 0:
+            raise InputError(Path("--fps"), f"{args.fps} frames per second", "give a positive frame rate")
+        from .extraction import extract_frames
+
+        cfg = FramesConfig(source=args.video, out_dir=args.out, count=args.count, stride=args.stride,
+                           downscale=tuple(sorted(set(args.downscale))), fps=args.fps,
+                           accept_truncated=args.accept_truncated, progress=not args.no_progress)
+        s = extract_frames(cfg)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"kept {s['n_frames']} of {s['decoded_frame_count']} frames ({s['selection']['rule']}), "
+          f"{s['width']}x{s['height']}, {s['timings']['total']:.1f} s -> {args.out}")
+    return 0

@@ -1,0 +1,56 @@
+"""Which source frames to keep: one per window, the sharpest.
+
+Windows are consecutive runs of source indices, so the kept frames stay
+spread over the whole capture (even coverage for structure from motion)
+while a blurred frame is replaced by a sharper neighbour.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class WindowRule:
+    """Maps a source position (0 .. n_total-1) to its window number."""
+
+    n_total: int
+    """Frames in the source."""
+    n_windows: int
+    """Windows the source is cut into (= frames kept)."""
+    stride: int | None
+    """Window length for the stride rule; None for the count rule (equal split of n_total)."""
+
+    @classmethod
+    def from_options(cls, n_total: int, count: int | None, stride: int | None) -> WindowRule:
+        if count is not None and stride is not None:
+            raise ValueError("give either count or stride, not both")
+        if count is not None:
+            if count < 1:
+                raise ValueError(f"count must be >= 1, got {count}")
+            return cls(n_total=n_total, n_windows=min(count, n_total), stride=None)
+        stride = 1 if stride is None else stride
+        if stride < 1:
+            raise ValueError(f"stride must be >= 1, got {stride}")
+        return cls(n_total=n_total, n_windows=-(-n_total // stride), stride=stride)
+
+    def window(self, position: int) -> int:
+        """Window of the frame at ``position`` (its rank in playback order)."""
+        if self.stride is not None:
+            return position // self.stride
+        return position * self.n_windows // self.n_total
+
+    def describe(self) -> str:
+        if self.stride is not None:
+            return f"sharpest frame in each window of {self.stride} consecutive frames"
+        return f"sharpest frame in each of {self.n_windows} equal windows over {self.n_total} frames"
+
+
+def sharpest_per_window(sharpness: list[float], rule: WindowRule) -> list[int]:
+    """Positions kept by ``rule``: in each window the sharpest frame (the earliest on ties)."""
+    best: dict[int, int] = {}
+    for position, score in enumerate(sharpness):
+        w = rule.window(position)
+        if w not in best or score > sharpness[best[w]]:
+            best[w] = position
+    return [best[w] for w in sorted(best)]

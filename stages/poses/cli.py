@@ -1,0 +1,98 @@
+"""``livescene poses``: COLMAP poses for extracted frames; ``livescene poses compare``: pose error vs truth."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from stages.scene import InputError, write_json
+
+from .config import PosesConfig
+
+
+def _estimate_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="livescene poses",
+        description="Estimate camera poses with COLMAP (pycolmap): SIFT with interactive objects masked out, "
+                    "sequential or exhaustive matching, incremental mapping; writes sparse/0, transforms.json "
+                    "(nerfstudio, OpenGL axes), points3D.ply, scene.json and poses.json. "
+                    "`livescene poses compare --help` compares poses with reference poses.")
+    d = PosesConfig(frames_dir=Path(), out_dir=Path())
+    p.add_argument("--frames", type=Path, required=True, help="output folder of `livescene frames` (holds images/)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--masks", type=Path, help="object masks per frame (PNG id maps, 0 = static, or .npy); "
+                                              "masked pixels get no features")
+    p.add_argument("--matcher", choices=["sequential", "exhaustive", "auto"], default=d.matcher,
+                   help=f"pairing (auto: exhaustive up to {d.exhaustive_max_images} frames, else sequential)")
+    p.add_argument("--overlap", type=int, default=d.sequential_overlap, help="sequential matching overlap")
+    p.add_argument("--vocab-tree", type=Path, help="COLMAP vocabulary tree: enables loop detection")
+    p.add_argument("--threads", type=int, default=d.threads, help="CPU threads (-1 = all)")
+    p.add_argument("--seed", type=int, default=d.seed, help="random seed")
+    p.add_argument("--min-registered", type=float, default=d.min_registered,
+                   help="quality gate: minimum fraction of frames that must get a pose")
+    p.add_argument("--camera-model", default=d.camera_model,
+                   choices=["SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"], help="camera model")
+    p.add_argument("--max-image-size", type=int, default=d.max_image_size,
+                   help="longest side for feature extraction (-1 = full)")
+    p.add_argument("--max-features", type=int, default=d.max_num_features, help="SIFT features per frame")
+    p.add_argument("--mask-dilate", type=int, help="mask dilation in pixels (default 1%% of the diagonal)")
+    p.add_argument("--keep-database", action="store_true", help="keep COLMAP's database.db")
+    p.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def _compare_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="livescene poses compare",
+        description="Align estimated poses to reference poses with a similarity (frames matched by frame id) and "
+                    "report camera-centre error relative to the scene extent, rotation error and focal error.")
+    p.add_argument("--pred", type=Path, required=True, help="estimated transforms.json (POSES/transforms.json)")
+    p.add_argument("--truth", type=Path, required=True, help="reference transforms.json (CAPTURE/truth/...)")
+    p.add_argument("--out", type=Path, help="write the report here (JSON)")
+    p.add_argument("--extent", type=float,
+                   help="scene extent in reference units (default: longest side of the scene_box in the "
+                        "reference's scene.json, else of the reference camera centres)")
+    return p
+
+
+def _compare(argv: list[str]) -> int:
+    from .comparison import compare_poses, summary_lines
+
+    args = _compare_parser().parse_args(argv)
+    report = compare_poses(args.pred, args.truth, extent=args.extent)
+    if args.out is not None:
+        write_json(args.out, report)
+    print("\n".join(summary_lines(report)))
+    return 0
+
+
+def _estimate(argv: list[str]) -> int:
+    from .pipeline import estimate_poses
+
+    a = _estimate_parser().parse_args(argv)
+    if not 0.0 <= a.min_registered <= 1.0:
+        raise InputError(Path("--min-registered"), f"{a.min_registered} is not a fraction", "give a value in [0, 1]")
+    cfg = PosesConfig(frames_dir=a.frames, out_dir=a.out, masks_dir=a.masks, matcher=a.matcher,
+                      sequential_overlap=a.overlap, vocab_tree=a.vocab_tree, threads=a.threads, seed=a.seed,
+                      min_registered=a.min_registered, camera_model=a.camera_model, max_image_size=a.max_image_size,
+                      max_num_features=a.max_features, mask_dilate_px=a.mask_dilate, keep_database=a.keep_database,
+                      progress=not a.no_progress, verbose=a.verbose)
+    s = estimate_poses(cfg)
+    t = s["timings"]
+    print(f"registered {s['n_registered']}/{s['n_frames']} frames ({s['registered_fraction']:.1%}), "
+          f"{s['n_points3D']} points, reprojection error {s['mean_reprojection_error']:.3f} px, "
+          f"{s['matcher']} matching, {t['total']:.1f} s -> {a.out}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        if argv and argv[0] == "compare":
+            return _compare(argv[1:])
+        return _estimate(argv)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2

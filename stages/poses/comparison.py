@@ -1,0 +1,123 @@
+"""Pose accuracy against reference poses: similarity alignment, centre, rotation and focal errors.
+
+Structure from motion recovers poses up to a similarity (scale, rotation,
+translation), so the reference is first brought into the estimate's world
+with a least-squares (Umeyama) similarity fitted to the camera centres of
+the frames both files hold (matched by frame id). The centre error is then
+expressed in reference units relative to the scene extent, so it reads the
+same whatever unit COLMAP picked.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2  # noqa: F401  (must load before pycolmap: the reverse order crashes cv2's PNG writer)
+import numpy as np
+import pycolmap
+
+from stages.scene import InputError, frame_id_of
+from stages.scene.transforms import camera_from_dict, load_json, parse_pose
+
+from .conventions import rotation_angle_deg
+
+
+def read_poses(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Frame id -> 4x4 OpenGL camera-to-world, and the top-level intrinsics of a transforms.json."""
+    data = load_json(Path(path))
+    frames = data.get("frames")
+    if not isinstance(frames, list) or not frames:
+        raise InputError(path, "no frames", "pass a transforms.json with a non-empty frames list")
+    poses = {}
+    for k, frame in enumerate(frames):
+        where = f"frame {k} ({frame.get('file_path', '?')})"
+        poses[frame_id_of(Path(str(frame.get("file_path", ""))).stem)] = parse_pose(
+            frame.get("transform_matrix"), Path(path), where)
+    return poses, data
+
+
+def scene_extent(truth_path: Path, truth_centres: np.ndarray, extent: float | None) -> tuple[float, str]:
+    """Length that centre errors are divided by: the longest side of the reference scene box."""
+    if extent is not None:
+        return float(extent), "given"
+    scene_json = Path(truth_path).parent / "scene.json"
+    if scene_json.is_file():
+        box = json.loads(scene_json.read_text()).get("scene_box")
+        if box is not None:
+            box = np.asarray(box, dtype=np.float64)
+            return float(np.max(box[1] - box[0])), f"longest side of scene_box in {scene_json}"
+    span = truth_centres.max(0) - truth_centres.min(0)
+    return float(np.max(span)), "longest side of the box around the reference camera centres (no scene.json)"
+
+
+def _stats(values: np.ndarray) -> dict[str, float]:
+    return {"mean": float(np.mean(values)), "median": float(np.median(values)), "max": float(np.max(values))}
+
+
+def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None) -> dict[str, Any]:
+    """Errors of ``pred_path`` poses against ``truth_path`` poses (both transforms.json)."""
+    pred, pred_data = read_poses(pred_path)
+    truth, truth_data = read_poses(truth_path)
+    common = sorted(set(pred) & set(truth))
+    if len(common) < 3:
+        raise InputError(pred_path, f"only {len(common)} frame ids in common with {truth_path}",
+                         "compare poses of the same capture (frame ids = last '_' token of the image names)")
+    pred_c = np.array([pred[f][:3, 3] for f in common])
+    truth_c = np.array([truth[f][:3, 3] for f in common])
+    sim = pycolmap.estimate_sim3d(src=truth_c, tgt=pred_c)
+    if sim is None:
+        raise InputError(pred_path, "no similarity aligns the camera centres (degenerate configuration)",
+                         "check that the cameras move (centres must not coincide)")
+    scale = float(sim.scale)
+    rot = np.asarray(sim.rotation.matrix())
+    sim3 = np.eye(4)
+    sim3[:3, :3] = scale * rot
+    sim3[:3, 3] = np.asarray(sim.translation)
+    aligned = truth_c @ sim3[:3, :3].T + sim3[:3, 3]
+    extent_value, extent_source = scene_extent(truth_path, truth_c, extent)
+    centre_err = np.linalg.norm(pred_c - aligned, axis=1) / scale  # in reference units
+    centre_rel = centre_err / extent_value
+    rot_err = np.array([rotation_angle_deg(pred[f][:3, :3], rot @ truth[f][:3, :3]) for f in common])
+
+    cam_pred = camera_from_dict(pred_data, Path(pred_path), "top level")
+    cam_truth = camera_from_dict(truth_data, Path(truth_path), "top level")
+    size_ratio = cam_truth.width / cam_pred.width  # frames may have been extracted downscaled
+    fx, fy = cam_pred.fx * size_ratio, cam_pred.fy * size_ratio
+    return {
+        "pred": str(pred_path),
+        "truth": str(truth_path),
+        "n_matched": len(common),
+        "n_truth_frames": len(truth),
+        "n_pred_frames": len(pred),
+        "truth_frames_missing_in_pred": sorted(set(truth) - set(pred)),
+        "sim3": sim3.tolist(),
+        "sim3_note": "maps reference (truth) world coordinates to predicted world coordinates: x_pred = sim3 @ x_truth",
+        "scale": scale,
+        "scene_extent": extent_value,
+        "scene_extent_source": extent_source,
+        "centre_error_relative": _stats(centre_rel),
+        "centre_error_truth_units": _stats(centre_err),
+        "rotation_error_deg": _stats(rot_err),
+        "focal_error": {
+            "pred_fx_at_truth_size": fx, "pred_fy_at_truth_size": fy,
+            "truth_fx": cam_truth.fx, "truth_fy": cam_truth.fy,
+            "relative_fx": abs(fx - cam_truth.fx) / cam_truth.fx,
+            "relative_fy": abs(fy - cam_truth.fy) / cam_truth.fy,
+        },
+        "per_frame": [{"frame": f, "centre_error_relative": float(c), "rotation_error_deg": float(r)}
+                      for f, c, r in zip(common, centre_rel, rot_err, strict=True)],
+    }
+
+
+def summary_lines(report: dict[str, Any]) -> list[str]:
+    c, r, f = report["centre_error_relative"], report["rotation_error_deg"], report["focal_error"]
+    return [
+        f"frames matched: {report['n_matched']} of {report['n_truth_frames']} reference frames",
+        f"camera centre error / scene extent ({report['scene_extent']:.3g}): mean {c['mean']:.3%}, "
+        f"median {c['median']:.3%}, max {c['max']:.3%}",
+        f"rotation error (deg): mean {r['mean']:.3f}, median {r['median']:.3f}, max {r['max']:.3f}",
+        f"focal length error: fx {f['relative_fx']:.2%}, fy {f['relative_fy']:.2%} "
+        f"(pred {f['pred_fx_at_truth_size']:.1f} vs truth {f['truth_fx']:.1f} px)",
+    ]

@@ -1,0 +1,53 @@
+"""Settings of the pose stage, one field per knob the CLI exposes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+Matcher = Literal["sequential", "exhaustive", "auto"]
+
+
+@dataclass
+class PosesConfig:
+    """How to run COLMAP on a folder of frames and what to accept as a usable result."""
+
+    frames_dir: Path
+    """FRAMES folder of `livescene frames` (images/ + frames.csv), or a plain folder of images."""
+    out_dir: Path
+    """POSES folder to write (sparse/0, transforms.json, points3D.ply, scene.json, poses.json)."""
+    masks_dir: Path | None = None
+    """Object masks (PNG id maps, 0 = static scene, or .npy label/one-hot maps); their pixels get no features."""
+    matcher: Matcher = "auto"
+    """Pairing: sequential (videos), exhaustive (small unordered sets), auto = exhaustive up to
+    ``exhaustive_max_images`` frames, sequential above."""
+    exhaustive_max_images: int = 40
+    """Largest frame count for which ``auto`` picks exhaustive matching (cost grows with n^2)."""
+    sequential_overlap: int = 10
+    """Sequential matching pairs each frame with this many successors (plus quadratic jumps)."""
+    vocab_tree: Path | None = None
+    """A COLMAP vocabulary-tree file; when given, sequential matching adds loop-closure pairs."""
+    threads: int = -1
+    """CPU threads for extraction, matching and mapping (-1 = all cores)."""
+    seed: int = 0
+    """Random seed for RANSAC and the mapper (results repeat for a fixed seed and thread count)."""
+    min_registered: float = 0.8
+    """Quality gate: smallest accepted fraction of frames with a pose."""
+    camera_model: str = "SIMPLE_RADIAL"
+    """COLMAP camera model shared by all frames (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV)."""
+    max_image_size: int = 1600
+    """Frames are downscaled to this longest side for feature extraction (-1 = full size)."""
+    max_num_features: int = 8192
+    """SIFT features kept per frame."""
+    mask_dilate_px: int | None = None
+    """Grow object masks by this many pixels before excluding them (None = 1% of the image diagonal)."""
+    static_motion_fraction: float = 0.004
+    """A camera whose matched features move less than this fraction of the image diagonal between every
+    pair of frames is reported as not moving."""
+    keep_database: bool = False
+    """Keep COLMAP's database.db in the output (large; useful for debugging)."""
+    progress: bool = True
+    """Show tqdm progress over the COLMAP steps."""
+    verbose: bool = False
+    """Let COLMAP print its own (very chatty) log."""
