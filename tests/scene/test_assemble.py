@@ -1,0 +1,139 @@
+"""`livescene scene assemble`: frames + poses + labels + states -> one validated scene dataset, and back."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from stages.labels import LabelsConfig, ingest_labels
+from stages.scene import Camera, SceneError, look_at, read_scene
+from stages.scene.assemble import AssembleConfig, assemble_scene
+from stages.scene.cli import main as scene_main
+from stages.scene.transforms import camera_to_dict
+from stages.states import StatesConfig, compute_states
+
+H, W = 12, 16
+N = 6
+NAMES = ["door", "drawer"]
+
+
+def make_stage_outputs(root: Path, registered: list[int] | None = None) -> dict[str, Path]:
+    """FRAMES (6 frames, source indices 0, 3, 6, ...), POSES (some registered), LABELS (frame 4 unlabelled), STATES."""
+    registered = list(range(N)) if registered is None else registered
+    rng = np.random.default_rng(0)
+    frames = root / "frames"
+    (frames / "images").mkdir(parents=True)
+    (root / "masks_png").mkdir()
+    rows = ["frame,source_index,timestamp,sharpness"]
+    for i in range(N):
+        name = f"frame_{3 * i:05d}.png"
+        cv2.imwrite(str(frames / "images" / name), rng.integers(0, 255, (H, W, 3), dtype=np.uint8))
+        rows.append(f"{name},{3 * i},{0.3 * i:.1f},1.0")
+        if i != 4:  # frame 4 carries no mask
+            lab = np.zeros((H, W), np.uint8)
+            lab[2:6, 1 + i:5 + i] = 1
+            lab[8:11, 8:14] = 2
+            cv2.imwrite(str(root / "masks_png" / name), lab)
+    (frames / "frames.csv").write_text("\n".join(rows) + "\n")
+    (root / "masks_png" / "mapping.yaml").write_text("1: door\n2: drawer\n")
+
+    poses = root / "poses"
+    poses.mkdir()
+    camera = Camera(fx=20.0, fy=20.0, cx=W / 2, cy=H / 2, width=W, height=H)
+    entries = []
+    for i in registered:
+        c2w = look_at(np.array([3 * np.cos(i), 3 * np.sin(i), 1.0]), np.zeros(3))
+        entries.append({"file_path": f"images/frame_{3 * i:05d}.png", "transform_matrix": c2w.tolist(),
+                        "source_index": 3 * i, "state": {"door": 0.123}})
+    (poses / "transforms.json").write_text(json.dumps({**camera_to_dict(camera), "frames": entries}))
+    (poses / "scene.json").write_text(json.dumps({"scene_box": [[-1, -1, -1], [1, 1, 1]], "units": "colmap"}))
+
+    labels = root / "labels"
+    ingest_labels(LabelsConfig(input=root / "masks_png", frames=frames, out=labels, progress=False))
+    keys = root / "key_frame_value.yaml"
+    keys.write_text(yaml.safe_dump({"frame_00000": {"door": 0.0, "drawer": 1.0}, "frame_00009": {"door": 1.0},
+                                    "frame_00015": {"drawer": 0.0, "door": 0.5}}))
+    states = root / "states"
+    compute_states(StatesConfig(key_frames=keys, frames=frames / "frames.csv", out=states, method="linear"))
+    prompts = root / "prompts.yaml"
+    prompts.write_text(yaml.safe_dump({"door": {"synonyms": ["cabinet door"], "description": "a door"}}))
+    return {"frames": frames, "poses": poses, "labels": labels, "states": states, "prompts": prompts}
+
+
+def test_round_trip(tmp_path):
+    paths = make_stage_outputs(tmp_path, registered=[0, 1, 2, 4, 5])  # frame 3 (source 9) not registered
+    out = tmp_path / "ds"
+    code = scene_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                       "--labels", str(paths["labels"]), "--states", str(paths["states"]),
+                       "--prompts", str(paths["prompts"]), "--out", str(out), "--no-progress"])
+    assert code == 0
+    ds = read_scene(out, deep=True)
+    assert ds.objects == NAMES and ds.object_ids == [1, 2]
+    assert [f.file_path for f in ds.frames] == [f"images/frame_{3 * i:05d}.png" for i in (0, 1, 2, 4, 5)]
+    assert [f.source_index for f in ds.frames] == [0, 3, 6, 12, 15]
+    assert [f.split for f in ds.frames] == ["test", "train", "test", "train", "test"]
+    assert ds.meta["unregistered_frames"] == ["frame_00009.png"]
+    assert ds.meta["frames_without_masks"] == ["00012"]
+    np.testing.assert_array_equal(ds.scene_box, [[-1, -1, -1], [1, 1, 1]])
+    assert ds.prompts["door"]["synonyms"] == ["cabinet door"]
+    # key frame 00009 belongs to an unregistered frame and is dropped; the others stay
+    assert ds.key_frames == {"00000": {"door": 0.0, "drawer": 1.0}, "00015": {"drawer": 0.0, "door": 0.5}}
+    poses = json.loads((paths["poses"] / "transforms.json").read_text())["frames"]
+    by_name = {Path(p["file_path"]).name: np.array(p["transform_matrix"]) for p in poses}
+    for f in ds.frames:
+        np.testing.assert_array_equal(f.c2w, by_name[Path(f.file_path).name])
+        src = cv2.imread(str(paths["frames"] / "images" / Path(f.file_path).name))
+        np.testing.assert_array_equal(cv2.imread(str(ds.image_path(f))), src)
+        if f.frame_id != "00012":
+            np.testing.assert_array_equal(ds.load_mask(f), np.load(paths["labels"] / "masks" / f"{f.frame_id}.npy"))
+    # states: linear door 0 @0 -> 1 @9 -> 0.5 @15; truth states in transforms.json are ignored
+    door = ds.state_matrix()[:, 0]
+    np.testing.assert_allclose(door, [0.0, 1 / 3, 2 / 3, 1 - 0.5 * 3 / 6, 0.5])
+    assert scene_main(["validate", str(out)]) == 0  # the existing subcommands still work
+
+
+def test_truth_transforms_file_as_poses(tmp_path):
+    paths = make_stage_outputs(tmp_path)
+    ds = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"] / "transforms.json",
+                                       states=paths["states"], out=tmp_path / "ds", split="every_n", split_n=3,
+                                       progress=False))
+    assert len(ds.frames) == N and not ds.has_masks and ds.objects == NAMES
+    assert [f.split for f in ds.frames] == ["train", "test", "train", "train", "test", "train"]
+    assert ds.scene_box is not None
+
+
+def test_states_for_other_objects_than_the_labels(tmp_path):
+    paths = make_stage_outputs(tmp_path)
+    (paths["labels"] / "mapping.yaml").write_text("1: door\n2: fridge\n")
+    with pytest.raises(SceneError, match=r"states\.csv: states are for objects \['door', 'drawer'\] but .*names "
+                                         r"\['door', 'fridge'\]"):
+        assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], labels=paths["labels"],
+                                      states=paths["states"], out=tmp_path / "ds", progress=False))
+    assert not (tmp_path / "ds").exists()
+
+
+def test_poses_of_other_frames_are_refused(tmp_path, capsys):
+    paths = make_stage_outputs(tmp_path)
+    data = json.loads((paths["poses"] / "transforms.json").read_text())
+    for fr in data["frames"]:
+        fr["file_path"] = fr["file_path"].replace("frame_", "other_9")
+    (paths["poses"] / "transforms.json").write_text(json.dumps(data))
+    code = scene_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                       "--out", str(tmp_path / "ds")])
+    err = capsys.readouterr().err
+    assert code == 2 and "transforms.json: no pose matches an image of" in err
+
+
+def test_image_size_that_is_no_integer_factor_of_the_poses(tmp_path):
+    paths = make_stage_outputs(tmp_path)
+    data = json.loads((paths["poses"] / "transforms.json").read_text())
+    data["w"], data["h"] = 24, 18
+    (paths["poses"] / "transforms.json").write_text(json.dumps(data))
+    with pytest.raises(SceneError, match=r"poses are for 24x18 images but the frames are 16x12"):
+        assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds",
+                                      progress=False))
