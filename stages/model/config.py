@@ -177,6 +177,20 @@ class LossWeights:
 
 
 @dataclass
+class ConerfConfig:
+    """The CoNeRF-style baseline (``--method conerf``; other methods ignore this section)."""
+
+    attribute_frequencies: int = 4
+    """Sinusoidal frequencies per gated attribute fed to the field MLP (0 = the raw gated value only)."""
+    hidden: int = 64
+    """Width of the density MLP's hidden layers (spatial features + encoded attributes -> density)."""
+    hidden_layers: int = 2
+    """Hidden layers of the density MLP (the attributes enter only here, so it needs depth)."""
+    latent_dim: int = 8
+    """Per-frame latent code width; learned-state mode regresses the attributes from it (key frames only)."""
+
+
+@dataclass
 class ModelConfig:
     """What the method is made of."""
 
@@ -194,6 +208,8 @@ class ModelConfig:
     """Language table."""
     losses: LossWeights = dataclasses.field(default_factory=LossWeights)
     """Loss weights."""
+    conerf: ConerfConfig = dataclasses.field(default_factory=ConerfConfig)
+    """CoNeRF-style baseline settings (used by ``--method conerf`` only)."""
 
 
 @dataclass
