@@ -54,6 +54,9 @@ def _compare_parser() -> argparse.ArgumentParser:
     p.add_argument("--extent", type=float,
                    help="scene extent in reference units (default: longest side of the scene_box in the "
                         "reference's scene.json, else of the reference camera centres)")
+    p.add_argument("--align", choices=["poses", "centres"], default="poses",
+                   help="similarity fit: poses = centres and orientations together (default; stable for short "
+                        "arcs), centres = Umeyama on camera centres only")
     return p
 
 
@@ -61,7 +64,7 @@ def _compare(argv: list[str]) -> int:
     from .comparison import compare_poses, summary_lines
 
     args = _compare_parser().parse_args(argv)
-    report = compare_poses(args.pred, args.truth, extent=args.extent)
+    report = compare_poses(args.pred, args.truth, extent=args.extent, align=args.align)
     if args.out is not None:
         write_json(args.out, report)
     print("\n".join(summary_lines(report)))

@@ -2,10 +2,18 @@
 
 Structure from motion recovers poses up to a similarity (scale, rotation,
 translation), so the reference is first brought into the estimate's world
-with a least-squares (Umeyama) similarity fitted to the camera centres of
-the frames both files hold (matched by frame id). The centre error is then
-expressed in reference units relative to the scene extent, so it reads the
-same whatever unit COLMAP picked.
+with a least-squares similarity fitted to the frames both files hold
+(matched by frame id). The centre error is then expressed in reference
+units relative to the scene extent, so it reads the same whatever unit
+COLMAP picked.
+
+Two fits are offered. ``centres`` is the classic Umeyama fit to the camera
+centres alone (ATE style). Its rotation is poorly determined when the
+centres lie near a line or a short arc (a walk along one wall, the tiny test
+scene), and that error then shows up as a constant rotation error in every
+frame. ``poses`` (the default) fits the rotation to the centres and the
+camera orientations together, each term normalised so that neither
+dominates, and the scale and translation to the centres given that rotation.
 """
 
 from __future__ import annotations
@@ -56,8 +64,52 @@ def _stats(values: np.ndarray) -> dict[str, float]:
     return {"mean": float(np.mean(values)), "median": float(np.median(values)), "max": float(np.max(values))}
 
 
-def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None) -> dict[str, Any]:
-    """Errors of ``pred_path`` poses against ``truth_path`` poses (both transforms.json)."""
+def similarity_from_centres(src: np.ndarray, tgt: np.ndarray) -> np.ndarray | None:
+    """4x4 similarity ``tgt ~ S @ src`` fitted to points (Umeyama, via pycolmap); None when degenerate."""
+    sim = pycolmap.estimate_sim3d(src=np.asarray(src, np.float64), tgt=np.asarray(tgt, np.float64))
+    if sim is None:
+        return None
+    out = np.eye(4)
+    out[:3, :3] = float(sim.scale) * np.asarray(sim.rotation.matrix())
+    out[:3, 3] = np.asarray(sim.translation)
+    return out
+
+
+def similarity_from_poses(src: np.ndarray, tgt: np.ndarray) -> np.ndarray | None:
+    """4x4 similarity mapping the world of camera-to-world poses ``src`` [N,4,4] onto that of ``tgt``.
+
+    The rotation maximises ``trace(R^T M)`` with ``M`` the sum of two
+    cross-covariances, each normalised to unit size: orientations
+    (``sum R_tgt R_src^T / N``) and centred camera centres (divided by their
+    RMS spread); solved with an SVD as in Umeyama's method. Scale and
+    translation then follow from the centres by least squares.
+    """
+    src, tgt = np.asarray(src, np.float64), np.asarray(tgt, np.float64)
+    cs, ct = src[:, :3, 3], tgt[:, :3, 3]
+    ds, dt = cs - cs.mean(0), ct - ct.mean(0)
+    spread_s, spread_t = np.sqrt((ds**2).sum(1).mean()), np.sqrt((dt**2).sum(1).mean())
+    if spread_s < 1e-12 or spread_t < 1e-12:
+        return None
+    m = np.einsum("nij,nkj->ik", tgt[:, :3, :3], src[:, :3, :3]) / len(src)
+    m += dt.T @ ds / (len(src) * spread_s * spread_t)
+    u, _, vt = np.linalg.svd(m)
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    rot = u @ d @ vt
+    scale = float(np.sum(dt * (ds @ rot.T)) / np.sum(ds**2))
+    if scale <= 0:
+        return None
+    out = np.eye(4)
+    out[:3, :3] = scale * rot
+    out[:3, 3] = ct.mean(0) - scale * rot @ cs.mean(0)
+    return out
+
+
+def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None,
+                  align: str = "poses") -> dict[str, Any]:
+    """Errors of ``pred_path`` poses against ``truth_path`` poses (both transforms.json).
+
+    ``align``: ``poses`` (centres and orientations) or ``centres`` (Umeyama on centres only).
+    """
     pred, pred_data = read_poses(pred_path)
     truth, truth_data = read_poses(truth_path)
     common = sorted(set(pred) & set(truth))
@@ -66,15 +118,17 @@ def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None
                          "compare poses of the same capture (frame ids = last '_' token of the image names)")
     pred_c = np.array([pred[f][:3, 3] for f in common])
     truth_c = np.array([truth[f][:3, 3] for f in common])
-    sim = pycolmap.estimate_sim3d(src=truth_c, tgt=pred_c)
-    if sim is None:
+    if align == "centres":
+        sim3 = similarity_from_centres(truth_c, pred_c)
+    elif align == "poses":
+        sim3 = similarity_from_poses(np.array([truth[f] for f in common]), np.array([pred[f] for f in common]))
+    else:
+        raise ValueError(f"unknown alignment {align!r}; use 'poses' or 'centres'")
+    if sim3 is None:
         raise InputError(pred_path, "no similarity aligns the camera centres (degenerate configuration)",
                          "check that the cameras move (centres must not coincide)")
-    scale = float(sim.scale)
-    rot = np.asarray(sim.rotation.matrix())
-    sim3 = np.eye(4)
-    sim3[:3, :3] = scale * rot
-    sim3[:3, 3] = np.asarray(sim.translation)
+    scale = float(np.cbrt(np.linalg.det(sim3[:3, :3])))
+    rot = sim3[:3, :3] / scale
     aligned = truth_c @ sim3[:3, :3].T + sim3[:3, 3]
     extent_value, extent_source = scene_extent(truth_path, truth_c, extent)
     centre_err = np.linalg.norm(pred_c - aligned, axis=1) / scale  # in reference units
@@ -92,6 +146,7 @@ def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None
         "n_truth_frames": len(truth),
         "n_pred_frames": len(pred),
         "truth_frames_missing_in_pred": sorted(set(truth) - set(pred)),
+        "alignment": align,
         "sim3": sim3.tolist(),
         "sim3_note": "maps reference (truth) world coordinates to predicted world coordinates: x_pred = sim3 @ x_truth",
         "scale": scale,

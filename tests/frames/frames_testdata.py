@@ -1,0 +1,43 @@
+"""Test data for the frames stage: small textured frames, some blurred, written as video or images."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+WIDTH, HEIGHT, FPS = 96, 64, 10.0
+
+
+def textured_frame(k: int) -> np.ndarray:
+    """A fine random texture, shifted a little per frame (fine detail: a high Laplacian variance)."""
+    rng = np.random.default_rng(1234)
+    big = (rng.random((HEIGHT + 40, WIDTH + 40)) * 255).astype(np.uint8)
+    big = cv2.GaussianBlur(big, (0, 0), 0.8)
+    y, x = k % 20, (2 * k) % 40
+    grey = big[y:y + HEIGHT, x:x + WIDTH]
+    return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+
+
+def blurred(image: np.ndarray, sigma: float) -> np.ndarray:
+    return cv2.GaussianBlur(image, (0, 0), sigma)
+
+
+def make_frames(n: int, sharp: set[int]) -> list[np.ndarray]:
+    """``n`` frames: those in ``sharp`` unblurred, the others blurred by an amount varying per frame."""
+    return [textured_frame(k) if k in sharp else blurred(textured_frame(k), 1.5 + 0.3 * (k % 3))
+            for k in range(n)]
+
+
+def write_video(path: Path, frames: list[np.ndarray], fourcc: str = "mp4v", fps: float = FPS) -> Path:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (WIDTH, HEIGHT))
+    assert writer.isOpened(), f"OpenCV cannot write {fourcc} here"
+    for frame in frames:
+        writer.write(frame)
+    writer.release()
+    return path
+
+
+# stride 5 over 20 frames: windows [0-4], [5-9], [10-14], [15-19]; one sharp frame in each, not at a window edge
+SHARP = {3, 6, 12, 19}

@@ -1,0 +1,149 @@
+"""livescene frames: source index kept, sharpest frame per window, downscaled copies, errors."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+from frames_testdata import FPS, HEIGHT, SHARP, WIDTH, make_frames, textured_frame, write_video
+from hypothesis import given
+from hypothesis import strategies as st
+
+from stages.frames import FramesConfig, WindowRule, extract_frames, sharpest_per_window
+from stages.frames.cli import main
+
+
+def read_table(out: Path) -> pd.DataFrame:
+    return pd.read_csv(out / "frames.csv")
+
+
+def test_every_frame_with_timestamps(blur_video: Path, tmp_path: Path) -> None:
+    out = tmp_path / "frames"
+    summary = extract_frames(FramesConfig(source=blur_video, out_dir=out, progress=False))
+    table = read_table(out)
+    assert list(table.columns) == ["frame", "source_index", "timestamp", "sharpness"]
+    assert table["source_index"].tolist() == list(range(20))
+    assert table["frame"].tolist() == [f"frame_{i:05d}.png" for i in range(20)]
+    np.testing.assert_allclose(table["timestamp"], np.arange(20) / FPS, atol=1e-6)
+    assert sorted(p.name for p in (out / "images").iterdir()) == table["frame"].tolist()
+    # the decoded content is the source frame (mp4v is lossy, so compare loosely)
+    first = cv2.imread(str(out / "images" / "frame_00003.png")).astype(float)
+    assert np.abs(first - textured_frame(3)).mean() < 12
+    meta = json.loads((out / "frames.json").read_text())
+    assert meta["fps"] == pytest.approx(FPS)
+    assert meta["source_frame_count"] == 20 and meta["decoded_frame_count"] == 20
+    assert summary["n_frames"] == 20 and not meta["truncated"]
+
+
+@pytest.mark.parametrize("option", [{"stride": 5}, {"count": 4}])
+def test_subsampling_keeps_source_index_and_sharpest(blur_video: Path, tmp_path: Path, option: dict) -> None:
+    out = tmp_path / "frames"
+    summary = extract_frames(FramesConfig(source=blur_video, out_dir=out, progress=False, **option))
+    table = read_table(out)
+    assert table["source_index"].tolist() == sorted(SHARP)  # the one sharp frame of each window of 5
+    assert table["frame"].tolist() == [f"frame_{i:05d}.png" for i in sorted(SHARP)]
+    np.testing.assert_allclose(table["timestamp"], np.array(sorted(SHARP)) / FPS, atol=1e-6)
+    # the streaming choice agrees with the reference rule applied to every frame's score
+    rule = WindowRule.from_options(20, option.get("count"), option.get("stride"))
+    assert sharpest_per_window(summary["sharpness_all"], rule) == sorted(SHARP)
+    # the sharpness column is the score of the kept frame, and it beats its window
+    scores = np.array(summary["sharpness_all"])
+    for _, row in table.iterrows():
+        i = int(row["source_index"])
+        window = scores[(i // 5) * 5:(i // 5) * 5 + 5]
+        assert row["sharpness"] == pytest.approx(window.max(), rel=1e-3)
+
+
+def test_image_folder_with_gaps_and_downscale(tmp_path: Path) -> None:
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    indices = [10, 12, 13, 17, 20, 21, 30]
+    frames = make_frames(8, {1, 4})  # sharp: index 12 (position 1) and 20 (position 4)
+    for pos, i in enumerate(indices):
+        cv2.imwrite(str(folder / f"IMG_{i:04d}.png"), frames[pos])
+    out = tmp_path / "frames"
+    assert main(["--video", str(folder), "--out", str(out), "--stride", "3", "--downscale", "2", "4",
+                 "--fps", "30", "--no-progress"]) == 0
+    table = read_table(out)
+    # windows by playback position: [10 12 13] [17 20 21] [30]
+    assert table["source_index"].tolist() == [12, 20, 30]
+    assert table["frame"].tolist() == ["frame_00012.png", "frame_00020.png", "frame_00030.png"]
+    np.testing.assert_allclose(table["timestamp"], [12 / 30, 20 / 30, 1.0])
+    for factor in (2, 4):
+        img = cv2.imread(str(out / f"images_{factor}" / "frame_00020.png"))
+        assert img.shape[:2] == (round(HEIGHT / factor), round(WIDTH / factor))
+    assert not (folder / "frames.csv").exists()  # the input folder is left alone
+
+
+@given(n=st.integers(1, 300), k=st.integers(1, 60), by_count=st.booleans())
+def test_windows_cover_the_source_in_order(n: int, k: int, by_count: bool) -> None:
+    rule = WindowRule.from_options(n, k if by_count else None, None if by_count else k)
+    windows = [rule.window(p) for p in range(n)]
+    assert windows[0] == 0 and windows[-1] == rule.n_windows - 1
+    assert all(0 <= b - a <= 1 for a, b in itertools.pairwise(windows))  # consecutive, none empty
+    assert rule.n_windows == (min(k, n) if by_count else -(-n // k))
+
+
+def test_ties_keep_the_earliest_frame() -> None:
+    rule = WindowRule.from_options(6, None, 3)
+    assert sharpest_per_window([1.0, 5.0, 5.0, 2.0, 2.0, 1.0], rule) == [1, 3]
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:
+    code = main([*argv, "--no-progress"])
+    return code, capsys.readouterr().err
+
+
+def test_missing_empty_and_garbage_videos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "frames"
+    code, err = run_cli(capsys, "--video", str(tmp_path / "nope.mp4"), "--out", str(out))
+    assert code == 2 and "nope.mp4: video file not found" in err
+    empty = tmp_path / "empty.mp4"
+    empty.write_bytes(b"")
+    code, err = run_cli(capsys, "--video", str(empty), "--out", str(out))
+    assert code == 2 and "empty.mp4: the video file is empty (0 bytes)" in err and "fix:" in err
+    garbage = tmp_path / "garbage.mp4"
+    garbage.write_bytes(b"this is not a video" * 50)
+    code, err = run_cli(capsys, "--video", str(garbage), "--out", str(out))
+    assert code == 2 and "garbage.mp4: OpenCV cannot open it as a video" in err and "ffmpeg" in err
+    assert not out.exists()
+
+
+def test_truncated_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # an mp4 cut short loses its index (written last) and does not open at all
+    whole = write_video(tmp_path / "whole.mp4", make_frames(20, SHARP))
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    code, err = run_cli(capsys, "--video", str(cut), "--out", str(tmp_path / "a"))
+    assert code == 2 and "cut.mp4" in err and "cut off before its index" in err
+    # an MJPG avi cut short still opens and declares 20 frames, but decoding stops early
+    avi = write_video(tmp_path / "whole.avi", make_frames(20, SHARP), fourcc="MJPG")
+    cut_avi = tmp_path / "cut.avi"
+    cut_avi.write_bytes(avi.read_bytes()[: avi.stat().st_size // 2])
+    out = tmp_path / "b"
+    code, err = run_cli(capsys, "--video", str(cut_avi), "--out", str(out))
+    assert code == 2 and "cut.avi: decoding stopped after" in err and "of the 20 frames" in err
+    assert "--accept-truncated" in err and not out.exists()
+    code, _ = run_cli(capsys, "--video", str(cut_avi), "--out", str(out), "--accept-truncated")
+    assert code == 0
+    meta = json.loads((out / "frames.json").read_text())
+    assert meta["truncated"] and 0 < meta["decoded_frame_count"] < 20
+    assert len(read_table(out)) == meta["decoded_frame_count"]
+
+
+def test_bad_options(tmp_path: Path, blur_video: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, err = run_cli(capsys, "--video", str(blur_video), "--out", str(tmp_path / "o"), "--count", "0")
+    assert code == 2 and "--count" in err
+    code, err = run_cli(capsys, "--video", str(blur_video), "--out", str(tmp_path / "o"), "--downscale", "1")
+    assert code == 2 and "--downscale" in err
+    folder = tmp_path / "bad"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "frame_00000.png"), textured_frame(0))
+    (folder / "frame_00001.png").write_bytes(b"not a png")
+    code, err = run_cli(capsys, "--video", str(folder), "--out", str(tmp_path / "o"))
+    assert code == 2 and "frame_00001.png: the image cannot be read" in err
