@@ -15,7 +15,7 @@ from .errors import LabelError
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 
 
-@dataclass(frozen=True)
+@dataclass
 class FrameSet:
     """Frame ids and the image size every mask must have."""
 
@@ -28,6 +28,10 @@ class FrameSet:
     root: Path
     """The folder the images were listed from."""
 
+    def __post_init__(self) -> None:
+        self._ids = set(self.frame_ids)
+        self._by_number = {int(f): f for f in self.frame_ids if f.isdigit()}
+
     def match(self, label_id: str) -> str | None:
         """The frame a label's id refers to: same id, or same number when zero padding differs."""
         if label_id in self._ids:
@@ -35,14 +39,6 @@ class FrameSet:
         if label_id.isdigit():
             return self._by_number.get(int(label_id))
         return None
-
-    @property
-    def _ids(self) -> set[str]:
-        return set(self.frame_ids)
-
-    @property
-    def _by_number(self) -> dict[int, str]:
-        return {int(f): f for f in self.frame_ids if f.isdigit()}
 
 
 def read_frame_set(frames_dir: str | Path) -> FrameSet:

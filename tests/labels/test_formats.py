@@ -109,3 +109,17 @@ def test_cli_writes_and_reports(label_files, capsys):
                         "--format", "png", "--no-progress"]) == 0
     assert "3/4 frames labelled" in capsys.readouterr().out
     assert (out / "labels.json").is_file()
+
+
+def test_npy_overlaps_go_to_the_later_object_and_empty_pixels_to_background(label_files):
+    src = write_npy(label_files.root, label_files.labels)
+    path = src / "masks" / "00000.npy"
+    mask = np.load(path)
+    mask[0, 0] = [True, False, True, False]  # door and fridge both claim the pixel
+    mask[0, 1] = False  # no channel at all
+    np.save(path, mask)
+    summary = ingest(src, label_files.frames, label_files.root / "out")
+    out = read_masks(label_files.root / "out")["00000"]
+    assert out[0, 0].tolist() == [False, False, True, False]
+    assert out[0, 1].tolist() == [False, False, False, True]
+    assert summary["overlap_pixels"] == {"00000": 1}
