@@ -22,6 +22,12 @@ def small_spec(n_frames: int = 8, width: int = 64, height: int = 48) -> CaptureS
     return spec
 
 
+@pytest.fixture(name="small_spec")
+def small_spec_fixture():
+    """The ``small_spec`` factory, for tests that need their own spec."""
+    return small_spec
+
+
 @pytest.fixture(scope="session")
 def tiny_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("capture") / "tiny"
