@@ -124,7 +124,7 @@ def compute_states(config: StatesConfig) -> dict:
                              "use an object name of the key frames / mapping")
     for method in [config.method, *config.object_methods.values()]:
         if method not in METHODS:
-            raise StateError(config.key_frames, f"unknown method {method!r}", f"use one of {list(METHODS)}")
+            raise StateError("--method", f"unknown method {method!r}", f"use one of {list(METHODS)}")
 
     x = frames.source_index.astype(np.float64)
     rows = []
