@@ -89,3 +89,20 @@ def test_cli_prints_error_and_exits_2(label_files, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "nowhere: label input not found" in err
+
+
+def test_npy_with_the_wrong_channel_count(label_files):
+    from labelset_writers import write_npy
+
+    src = write_npy(label_files.root, label_files.labels)
+    np.save(src / "masks" / "00002.npy", np.zeros((48, 64, 3), bool))
+    with pytest.raises(LabelError, match=r"00002\.npy: mask has shape \(48, 64, 3\), expected H x W x 4"):
+        run(src, label_files.frames, label_files.root / "out")
+
+
+def test_frames_folder_without_images(label_files, tmp_path):
+    empty = tmp_path / "empty_frames"
+    (empty / "images").mkdir(parents=True)
+    src = write_png(label_files.root, label_files.labels)
+    with pytest.raises(LabelError, match=r"images: no images \(\.png/\.jpg\) found"):
+        run(src, empty, label_files.root / "out")

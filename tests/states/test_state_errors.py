@@ -125,3 +125,20 @@ def test_cli_reports_error_and_exits_2(tmp_path, capsys):
     code = states_main(["--key-frames", str(keys), "--frames", str(frames), "--out", str(tmp_path / "out"),
                         "--range", "door=1,0"])
     assert code == 2 and "'door=1,0' is not OBJECT=LO,HI" in capsys.readouterr().err
+
+
+def test_constant_value_outside_unit_range_needs_a_range(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,5\n10,door,5\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 2: 'door' has the single value 5\.0 on every key frame.*"
+                                         r"--range door=LO,HI"):
+        run(tmp_path, keys)
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0.5\n10,door,0.5\n")
+    assert run(tmp_path, keys)["ranges"]["door"]["source"].startswith("constant key frames")
+
+
+def test_option_for_an_unknown_object_or_method(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,1\n")
+    with pytest.raises(StateError, match=r"keys\.csv: option names unknown object 'sofa' \(objects \['door'\]\)"):
+        run(tmp_path, keys, object_methods={"sofa": "step"})
+    with pytest.raises(StateError, match=r"--method: unknown method 'cubic'"):
+        run(tmp_path, keys, method="cubic")
