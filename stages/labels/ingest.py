@@ -129,6 +129,9 @@ def ingest_labels(config: LabelsConfig) -> dict:
     label_set = open_label_set(config)
     if not label_set.names:
         raise LabelError(config.input, "the label set names no objects", "add at least one object")
+    if not label_set.entries:
+        raise LabelError(config.input, f"no {label_set.format} label files found",
+                         "point --input at the masks, or pass the --format they are in")
     matched: dict[str, str] = {}
     unmatched: list[str] = []
     for entry in label_set.entries:

@@ -106,3 +106,9 @@ def test_frames_folder_without_images(label_files, tmp_path):
     src = write_png(label_files.root, label_files.labels)
     with pytest.raises(LabelError, match=r"images: no images \(\.png/\.jpg\) found"):
         run(src, empty, label_files.root / "out")
+
+
+def test_explicit_format_with_no_such_files(label_files):
+    src = write_png(label_files.root, label_files.labels)
+    with pytest.raises(LabelError, match=r"png: no npy label files found.*--format"):
+        run(src, label_files.frames, label_files.root / "out", fmt="npy")
