@@ -1,0 +1,426 @@
+"""Numerical stability cases: stiff and extreme inputs must train and render with finite values.
+
+Each case trains a tiny LiveScene briefly (or probes one component) and checks
+finite losses, gradients and renders AND a useful result: the loss goes down,
+the weights stay a distribution, the reduced-precision render stays close to
+float32, a scene in other units trains like the same scene in metres.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .brief_training import make_trainer, nonfinite_grads, render_held_out, require_learning, train_briefly
+from .case_context import CaseContext
+from .case_registry import CaseSkipped, Outcome, case, require, require_module
+from .tiny_scenes import band_labels, capture_dataset, hand_built_dataset, object_names
+
+# -- states -------------------------------------------------------------------------------------------------------
+
+
+@case("states_exactly_0_and_1", "numerics",
+      "given states of exactly 0 and 1 (the ends of the k axis) and learned states supervised by key frames of "
+      "exactly 0 and 1 train with finite loss and gradients, the loss decreases, renders at 0 and 1 are finite")
+def states_exactly_0_and_1(ctx: CaseContext) -> Outcome:
+    root = ctx.folder("states-0-1")
+
+    def binary(i: int, n: int) -> dict[str, float]:
+        return {name: float((i + j) % 2) for j, name in enumerate(object_names(2))}
+
+    ds = hand_built_dataset(root / "ds", states=binary)
+    given = train_briefly(ds.root, root / "given", steps=ctx.steps)
+    require_learning(given, "given states")
+    learned = train_briefly(ds.root, root / "learned", steps=ctx.steps, overrides=["model.state.mode=learned"])
+    require_learning(learned, "learned states")
+    require("state_mse" in learned.last_terms, "learned mode did not report a state_mse term")
+    model = given.trainer.model.eval()
+    batch = given.trainer.eval_rays.batch(torch.arange(64))
+    for value in (0.0, 1.0):
+        batch.rays.states = torch.full_like(batch.rays.states, value)
+        with torch.no_grad():
+            out = model(batch.rays, step=given.trainer.step)
+        require(bool(torch.isfinite(out["rgb"]).all()), f"render at state {value} is not finite")
+    return Outcome(f"given: {given.summary()}; learned: {learned.summary()}",
+                   {"given_loss": [given.first, given.last], "learned_loss": [learned.first, learned.last],
+                    "learned_state_mse": learned.last_terms["state_mse"]})
+
+
+@case("states_outside_unit_range", "numerics",
+      "states outside [0, 1] in transforms.json are clamped to [0, 1] when read for training, with a warning "
+      "that names the frame; training stays finite")
+def states_outside_unit_range(ctx: CaseContext) -> Outcome:
+    root = ctx.folder("states-outside")
+    ds = hand_built_dataset(root / "ds")
+    tpath = ds.root / "transforms.json"
+    data = json.loads(tpath.read_text())
+    data["frames"][2]["state"]["object0"] = 1.3
+    data["frames"][5]["state"]["object1"] = -0.2
+    tpath.write_text(json.dumps(data))
+    bad_frames = [data["frames"][2]["file_path"], data["frames"][5]["file_path"]]
+    stderr = io.StringIO()
+    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stderr(stderr):
+        warnings.simplefilter("always")
+        trainer = make_trainer(ds.root, root / "run", steps=ctx.steps)
+    said = " ".join(str(w.message) for w in caught) + " " + stderr.getvalue()
+    states = torch.cat([trainer.train_rays.states, trainer.eval_rays.states])
+    require(float(states.min()) >= 0.0 and float(states.max()) <= 1.0,
+            f"states in [{float(states.min()):.2f}, {float(states.max()):.2f}] reach the model unclamped "
+            "(the stage that reads transforms.json states should clamp them to [0, 1])")
+    for frame in bad_frames:
+        fid = Path(frame).stem
+        require(fid in said or frame in said, f"no warning names {frame} (out-of-range state); got {said.strip()!r}")
+    run = train_briefly(ds.root, root / "run2", steps=ctx.steps)
+    require_learning(run, "clamped states")
+    return Outcome(f"clamped, warning names {len(bad_frames)} frames; {run.summary()}",
+                   {"loss": [run.first, run.last]})
+
+
+@case("step_change_stiff_capture", "numerics",
+      "the `stiff` capture (a door jumping 0 -> 1 between adjacent frames and key frames) trains with finite "
+      "loss and gradients and the loss decreases; its truth really contains the jump")
+def step_change_stiff_capture(ctx: CaseContext) -> Outcome:
+    data = ctx.cached("capture-stiff", lambda: capture_dataset(ctx.workdir, "stiff", n_frames=8 if ctx.quick else 16))
+    from stages.scene import read_scene
+
+    ds = read_scene(data)
+    states = ds.state_matrix()
+    jump = float(np.abs(np.diff(states, axis=0)).max())
+    require(jump >= 0.99, f"the stiff capture's largest state change between adjacent frames is {jump:.2f}, not a step")
+    run = train_briefly(data, ctx.folder("stiff-run"), steps=ctx.steps)
+    require_learning(run, "stiff capture")
+    render = render_held_out(run)
+    return Outcome(f"jump {jump:.2f} between adjacent frames; {run.summary()}; held-out PSNR {render['psnr']:.1f}",
+                   {"max_adjacent_jump": jump, "loss": [run.first, run.last], **render})
+
+
+# -- geometry -----------------------------------------------------------------------------------------------------
+
+
+@case("objects_touching_box", "numerics",
+      "fields sampled exactly on and just outside the faces and corners of the scene box give finite values and "
+      "gradients; a capture whose objects stand against the walls (the box faces) trains finitely")
+def objects_touching_box(ctx: CaseContext) -> Outcome:
+    require_module("stages.model", "model, issue 6")
+    from stages.model.config import ModelConfig
+    from stages.model.fields import ProbabilityField, RadianceField
+
+    cfg = ModelConfig()
+    cfg.field.base_resolution, cfg.field.channels, cfg.field.scales = 8, 4, [1, 2]
+    field = RadianceField(cfg.field, 4)
+    prob = ProbabilityField(cfg.probability, 2)
+    corners = torch.tensor(np.array(np.meshgrid(*[[-1.0, 1.0]] * 4)).reshape(4, -1).T, dtype=torch.float32)
+    faces = torch.tensor([[1.0, 0.2, -0.3, 0.5], [-1.0, 1.0, 0.0, -1.0], [1.0 + 1e-6, 0.0, 0.0, 0.0],
+                          [-1.0 - 1e-6, 1.0 + 1e-6, 0.3, 1.0]])
+    coords = torch.cat([corners, faces]).clamp(-1.0, 1.0).requires_grad_(True)  # the model clamps the same way
+    gen = torch.Generator().manual_seed(0)
+    dirs = torch.nn.functional.normalize(torch.randn(len(coords), 3, generator=gen), dim=-1)
+    sigma, rgb = field(coords, dirs)
+    logits = prob(coords[:, :3], torch.rand(len(coords), 2))
+    (sigma.sum() + rgb.sum() + logits.sum()).backward()
+    require(bool(torch.isfinite(sigma).all() & torch.isfinite(rgb).all() & torch.isfinite(logits).all()),
+            "field values at the box faces are not finite")
+    grads = [p.grad for p in [*field.parameters(), *prob.parameters()] if p.grad is not None]
+    require(all(bool(torch.isfinite(g).all()) for g in grads), "gradients at the box faces are not finite")
+    # the border vertices of the planes must receive gradient (a sample on the face reaches the last grid vertex)
+    plane = field.encoding.grids[0].planes[0]
+    border = float(plane.grad[..., -1].abs().sum() + plane.grad[..., 0].abs().sum())
+    require(border > 0, "no gradient reaches the border vertices of the xy plane from samples on the box faces")
+    values = {"probe_points": len(coords), "border_grad": border}
+    metric = f"{len(coords)} face/corner samples finite, border-vertex gradient {border:.2g}"
+    try:  # a capture whose objects' backs stand on the room walls: the truth scene box is the room
+        data = ctx.cached("capture-demo", lambda: capture_dataset(ctx.workdir, "demo", n_frames=8))
+    except CaseSkipped:
+        return Outcome(metric + " (demo capture not available)", values)
+    run = train_briefly(data, ctx.folder("touching-run"), steps=ctx.steps)
+    require_learning(run, "demo capture, objects against the box faces")
+    values["loss"] = [run.first, run.last]
+    return Outcome(f"{metric}; demo capture {run.summary()}", values)
+
+
+@case("rays_missing_the_box", "numerics",
+      "rays that miss the scene box, graze a face, run along an axis or start inside it get finite near/far, "
+      "render the background (accumulation ~0 for misses) and give finite loss and gradients")
+def rays_missing_the_box(ctx: CaseContext) -> Outcome:
+    root = ctx.folder("rays-miss")
+    ds = hand_built_dataset(root / "ds")
+    trainer = make_trainer(ds.root, root / "run", steps=ctx.steps)
+    from stages.model.rays import RayBundle
+    from stages.model.scene_normalization import aabb_near_far
+
+    origins = torch.tensor([[3.0, 0, 0], [3.0, 0, 0], [0, 0, 5.0], [1.0, 1.0, 3.0], [0.0, 0.0, 0.0],
+                            [-3.0, 0.5, 0.5], [3.0, 3.0, 3.0], [0.0, 2.0, 0.0]])
+    dirs = torch.tensor([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [0, 0, -1.0], [0.3, -0.2, 0.9],
+                         [1.0, 0, 0], [-1.0, -1.0, -1.0], [0.0, 0.0, 1.0]])
+    misses = torch.tensor([True, True, True, False, False, False, False, True])  # [3]: grazes the x=y=1 edge
+    dirs = torch.nn.functional.normalize(dirs, dim=-1)
+    nears, fars = aabb_near_far(origins, dirs, 0.05)
+    require(bool(torch.isfinite(nears).all() & torch.isfinite(fars).all() & (fars > nears).all()),
+            f"near/far not finite or empty: {nears.tolist()} {fars.tolist()}")
+    n = len(origins)
+    rays = RayBundle(origins, dirs, nears, fars, torch.rand(n, 2), torch.zeros(n))
+    model = trainer.model
+    out = model(rays, step=0, generator=torch.Generator().manual_seed(0))
+    loss = (out["rgb"] - 0.5).square().mean() + out["logits"].square().mean() * 1e-3
+    loss.backward()
+    require(bool(torch.isfinite(loss)), "loss on rays missing the box is not finite")
+    bad = nonfinite_grads(model)
+    require(not bad, f"non-finite gradients from rays missing the box: {bad[:3]}")
+    acc = out["accumulation"].detach()
+    bg_err = float((out["rgb"].detach()[misses] - model.background).abs().max())
+    require(float(acc[misses].max()) < 1e-2, f"rays that miss the box accumulate {float(acc[misses].max()):.3g}")
+    require(bg_err < 1e-2, f"rays that miss the box do not show the background (error {bg_err:.3g})")
+    return Outcome(f"{int(misses.sum())} misses: accumulation <= {float(acc[misses].max()):.1e}, background error "
+                   f"{bg_err:.1e}; loss and gradients finite",
+                   {"miss_accumulation_max": float(acc[misses].max()), "background_error": bg_err})
+
+
+# -- densities and precision --------------------------------------------------------------------------------------
+
+
+@case("extreme_densities", "numerics",
+      "volume-rendering weights stay finite, in [0, 1] and sum to <= 1 for densities from 0 to inf (log-space "
+      "transmittance) and match a float64 reference; the truncated exp has finite values and gradients at "
+      "|x| = 1e4; training with the density bias at +30 and -30 stays finite")
+def extreme_densities(ctx: CaseContext) -> Outcome:
+    require_module("stages.model", "model, issue 6")
+    from stages.model.fields.activations import trunc_exp
+    from stages.model.renderers import render_weights
+
+    density = torch.tensor([[0.0, 1e-30, 1e-8, 1.0, 1e3, 1e8, 1e30, float("inf")],
+                            [float("nan"), 0.0, 1e38, 0.0, 0.0, 0.0, 0.0, 0.0],
+                            [1e-30] * 8, [50.0] * 8])
+    deltas = torch.full_like(density, 0.01)
+    w = render_weights(density, deltas)
+    require(bool(torch.isfinite(w).all()), f"weights not finite: {w}")
+    require(bool((w >= 0).all() & (w <= 1).all()), "weights outside [0, 1]")
+    require(float(w.sum(-1).max()) <= 1.0 + 1e-6, f"weights sum to {float(w.sum(-1).max())} > 1")
+    require(float(w[0, 6]) > 0.999 or float(w[0, :6].sum()) > 0.999, "an opaque sample did not stop the ray")
+    # float64 reference (product of 1 - alpha) on the rows without inf/nan
+    d64 = density[2:].double()
+    alpha = 1 - torch.exp(-d64 * 0.01)
+    trans = torch.cumprod(torch.cat([torch.ones(2, 1, dtype=torch.float64), 1 - alpha[:, :-1]], -1), -1)
+    ref_err = float((w[2:].double() - alpha * trans).abs().max())
+    require(ref_err < 1e-6, f"log-space weights differ from the float64 reference by {ref_err:.2e}")
+    x = torch.tensor([-1e4, -100.0, 0.0, 15.0, 100.0, 1e4], requires_grad=True)
+    y = trunc_exp(x, 15.0)
+    y.sum().backward()
+    require(bool(torch.isfinite(y).all() & torch.isfinite(x.grad).all()), "truncated exp not finite at |x| = 1e4")
+    root = ctx.folder("densities")
+    ds = hand_built_dataset(root / "ds")
+    runs = {}
+    for bias in (30.0, -30.0):
+        run = train_briefly(ds.root, root / f"run{bias:+g}", steps=ctx.steps,
+                            overrides=[f"model.field.density_bias={bias}"])
+        require(run.skipped == 0, f"density bias {bias:+g}: {run.skipped} steps skipped as non-finite")
+        render_held_out(run)
+        runs[bias] = run
+    high, low = runs[30.0], runs[-30.0]
+    return Outcome(f"weights finite for 0..inf, float64 error {ref_err:.1e}; bias +30: {high.summary()}; "
+                   f"bias -30: {low.summary()}",
+                   {"reference_error": ref_err, "bias_plus30_loss": [high.first, high.last],
+                    "bias_minus30_loss": [low.first, low.last]})
+
+
+def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> Outcome:
+    """Forward + backward of a whole batch (the main field's activations are the largest) under autocast."""
+    root = ctx.folder(f"autocast-{device}-{str(dtype).replace('torch.', '')}")
+    ds = hand_built_dataset(root / "ds", width=32, height=24)
+    # the main field at its cpu-demo width (2 scales x 16 channels, 64-wide MLPs): its activations are the largest
+    size = ["model.field.base_resolution=64", "model.field.channels=16", "model.field.scales=[1,2]",
+            "model.field.hidden=64", "model.field.color_hidden=64", "model.sampling.num_samples=24"]
+    rays = 256 if ctx.quick else 1024
+    trainer = make_trainer(ds.root, root / "run", steps=ctx.steps, device=device,
+                           overrides=[*size, f"train.batch_rays={rays}"])
+    model = trainer.model
+    batch = trainer.train_rays.sample(rays, torch.Generator().manual_seed(1))
+
+    def forward(enabled: bool) -> tuple[dict, torch.Tensor]:
+        model.zero_grad(set_to_none=True)
+        gen = torch.Generator(device=trainer.device).manual_seed(2)
+        with torch.autocast(device_type=device, dtype=dtype, enabled=enabled):
+            out = model(batch.rays, step=0, generator=gen)
+            terms = model.loss_dict(out, batch, 0)
+        loss = sum(terms.values())
+        loss.backward()
+        return out, loss
+
+    ref, ref_loss = forward(False)
+    ref_rgb = ref["rgb"].detach().float()
+    seen: list[torch.dtype] = []  # proof that the field's first layer really ran in reduced precision
+    first = next(m for m in model.field.density_mlp.modules() if isinstance(m, torch.nn.Linear))
+    hook = first.register_forward_hook(lambda m, i, o: seen.append(o.dtype))
+    out, loss = forward(True)
+    hook.remove()
+    require(seen and all(d == dtype for d in seen), f"the density MLP ran in {set(seen)}, not {dtype}: autocast "
+                                                    "did not reach the largest activations")
+    require(bool(torch.isfinite(loss)), f"{dtype} autocast loss is not finite")
+    bad = nonfinite_grads(model)
+    require(not bad, f"{dtype} autocast gradients not finite: {bad[:3]}")
+    for key in ("rgb", "depth", "accumulation", "logits"):
+        require(bool(torch.isfinite(out[key]).all()), f"{dtype} autocast {key} not finite")
+    rgb_err = float((out["rgb"].detach().float() - ref_rgb).abs().max())
+    loss_rel = abs(float(loss.detach()) - float(ref_loss.detach())) / max(abs(float(ref_loss)), 1e-12)
+    tol = 0.05 if dtype == torch.bfloat16 else 0.01
+    require(rgb_err < tol, f"{dtype} autocast rgb differs from float32 by {rgb_err:.3g} (> {tol})")
+    samples = rays * model.config.sampling.num_samples
+    width = model.field.encoding.out_dim
+    return Outcome(f"{samples} x {width} field activations: max rgb error {rgb_err:.1e}, loss rel. error "
+                   f"{loss_rel:.1e} vs float32",
+                   {"rgb_max_error": rgb_err, "loss_rel_error": loss_rel, "activations": [samples, width]})
+
+
+@case("autocast_cpu_bf16", "numerics",
+      "a training forward + backward under CPU bf16 autocast gives finite outputs and gradients, rgb within 0.05 "
+      "of float32")
+def autocast_cpu_bf16(ctx: CaseContext) -> Outcome:
+    return _autocast_check(ctx, "cpu", torch.bfloat16)
+
+
+@case("autocast_cpu_fp16", "numerics",
+      "a training forward + backward under CPU fp16 autocast gives finite outputs and gradients, rgb within 0.01 "
+      "of float32")
+def autocast_cpu_fp16(ctx: CaseContext) -> Outcome:
+    return _autocast_check(ctx, "cpu", torch.float16)
+
+
+@case("autocast_cuda", "numerics",
+      "the same under CUDA bf16 and fp16 autocast (skipped without a GPU)")
+def autocast_cuda(ctx: CaseContext) -> Outcome:
+    if not torch.cuda.is_available():
+        raise CaseSkipped("torch sees no CUDA device on this machine")
+    bf = _autocast_check(ctx, "cuda", torch.bfloat16)
+    fp = _autocast_check(ctx, "cuda", torch.float16)
+    return Outcome(f"bf16: {bf.metric}; fp16: {fp.metric}", {"bf16": bf.values, "fp16": fp.values})
+
+
+# -- masks and objects --------------------------------------------------------------------------------------------
+
+
+@case("near_empty_masks", "numerics",
+      "frames where an object covers a single pixel (under H*W/300) are marked unreliable and left out of the "
+      "mask losses; an object absent from a frame is fine; training is finite and the loss decreases")
+def near_empty_masks(ctx: CaseContext) -> Outcome:
+    root = ctx.folder("near-empty")
+    base = band_labels(2)
+
+    def labels(i: int, h: int, w: int) -> np.ndarray:
+        out = base(i, h, w)
+        if i % 2 == 0:  # object0 shrinks to one pixel, object1 disappears
+            out[out < 2] = 2
+            out[h - 1, 0] = 0
+        return out
+
+    ds = hand_built_dataset(root / "ds", labels=labels)
+    run = train_briefly(ds.root, root / "run", steps=ctx.steps)
+    require_learning(run, "near-empty masks")
+    labels_t = run.trainer.train_rays.labels
+    frames = run.trainer.train_rays.frames
+    unreliable = [f.file_path for k, f in enumerate(frames) if bool((labels_t[k] == -1).all())]
+    expected = [f.file_path for k, f in enumerate(frames) if int(f.frame_id) % 2 == 0]
+    require(unreliable == expected, f"unreliable frames {unreliable}, expected the one-pixel frames {expected}")
+    require(math.isfinite(run.last_terms.get("focal_mask", math.nan)), "focal mask loss missing or not finite")
+    return Outcome(f"{len(unreliable)} one-pixel frames skipped by the mask losses; {run.summary()}",
+                   {"unreliable_frames": len(unreliable), "loss": [run.first, run.last]})
+
+
+@case("object_fills_view", "numerics",
+      "frames where one object covers every pixel (no background, no label pairs to repel) train with finite "
+      "focal and repulsion losses and the loss decreases")
+def object_fills_view(ctx: CaseContext) -> Outcome:
+    root = ctx.folder("fills-view")
+    base = band_labels(2)
+
+    def labels(i: int, h: int, w: int) -> np.ndarray:
+        return np.zeros((h, w), dtype=np.int64) if i % 2 == 0 else base(i, h, w)
+
+    ds = hand_built_dataset(root / "ds", labels=labels)
+    run = train_briefly(ds.root, root / "run", steps=ctx.steps)
+    require_learning(run, "object filling the view")
+    rays = run.trainer.train_rays
+    full = [f for k, f in enumerate(rays.frames) if bool((rays.labels[k] == 0).all())]
+    require(len(full) > 0, "no training frame is filled by the object")
+    return Outcome(f"{len(full)} training frames filled by one object; {run.summary()}",
+                   {"filled_frames": len(full), "loss": [run.first, run.last]})
+
+
+@case("ten_objects", "numerics",
+      "a scene with 10 objects trains with finite loss and gradients, the loss decreases, the rendered "
+      "probabilities have 11 channels, and the radiance field has as many parameters as with 2 objects")
+def ten_objects(ctx: CaseContext) -> Outcome:
+    root = ctx.folder("ten-objects")
+    ds = hand_built_dataset(root / "ds", n_objects=10, width=40, height=20)
+    run = train_briefly(ds.root, root / "run", steps=ctx.steps)
+    require_learning(run, "10 objects")
+    render = render_held_out(run)
+    two = make_trainer(hand_built_dataset(root / "ds2", n_objects=2).root, root / "run2", steps=1)
+    n10 = sum(p.numel() for p in run.trainer.model.field.parameters())
+    n2 = sum(p.numel() for p in two.model.field.parameters())
+    require(n10 == n2, f"radiance field has {n10} parameters with 10 objects but {n2} with 2")
+    logits = run.trainer.model.eval()(run.trainer.eval_rays.batch(torch.arange(8)).rays)["logits"]
+    require(logits.shape[-1] == 11, f"probabilities have {logits.shape[-1]} channels, expected 11")
+    return Outcome(f"{run.summary()}; field parameters {n10} (same as 2 objects); held-out PSNR {render['psnr']:.1f}",
+                   {"loss": [run.first, run.last], "field_params": n10, **render})
+
+
+@case("stress_capture", "numerics",
+      "the `stress` capture (10 objects) trains with finite loss and gradients and the loss decreases")
+def stress_capture(ctx: CaseContext) -> Outcome:
+    data = ctx.cached("capture-stress", lambda: capture_dataset(ctx.workdir, "stress", width=48, height=36,
+                                                                n_frames=8))
+    run = train_briefly(data, ctx.folder("stress-run"), steps=ctx.steps)
+    require_learning(run, "stress capture")
+    n = len(run.trainer.ds.objects)
+    require(n >= 10, f"the stress capture has {n} objects, expected 10")
+    return Outcome(f"{n} objects; {run.summary()}", {"objects": n, "loss": [run.first, run.last]})
+
+
+# -- units --------------------------------------------------------------------------------------------------------
+
+
+def _units_case(ctx: CaseContext, scale: float) -> Outcome:
+    root = ctx.folder(f"units-{scale:g}")
+    metres = ctx.cached("units-1", lambda: train_briefly(
+        hand_built_dataset(ctx.folder("units-1") / "ds").root, ctx.workdir / "units-1" / "run", steps=ctx.steps))
+    ds = hand_built_dataset(root / "ds", units_scale=scale)
+    run = train_briefly(ds.root, root / "run", steps=ctx.steps)
+    require_learning(run, f"{scale:g}x units")
+    rel = max(abs(a - b) / max(abs(b), 1e-12) for a, b in zip(run.losses, metres.losses, strict=True))
+    require(rel < 1e-3, f"{scale:g}x units train differently from metres: loss rel. difference {rel:.2e}")
+    depth = render_held_out(run)
+    return Outcome(f"{run.summary()}; loss within {rel:.1e} of the same scene in metres",
+                   {"loss": [run.first, run.last], "max_rel_loss_difference": rel, **depth})
+
+
+@case("units_1000x", "numerics",
+      "the same room with every length x1000 (scene box, poses) trains finitely and like the room in metres "
+      "(loss curve within 1e-3 relative)")
+def units_1000x(ctx: CaseContext) -> Outcome:
+    return _units_case(ctx, 1000.0)
+
+
+@case("units_0.001x", "numerics",
+      "the same room with every length x0.001 trains finitely and like the room in metres (within 1e-3)")
+def units_0_001x(ctx: CaseContext) -> Outcome:
+    return _units_case(ctx, 0.001)
+
+
+@case("extreme_capture", "numerics",
+      "the `extreme` capture (1000x units) trains with finite loss and gradients and the loss decreases")
+def extreme_capture(ctx: CaseContext) -> Outcome:
+    data = ctx.cached("capture-extreme", lambda: capture_dataset(ctx.workdir, "extreme", n_frames=8))
+    run = train_briefly(data, ctx.folder("extreme-run"), steps=ctx.steps)
+    require_learning(run, "extreme capture")
+    box = run.trainer.ds.scene_box
+    extent = float(np.max(box[1] - box[0])) if box is not None else math.nan
+    return Outcome(f"scene box extent {extent:g} units; {run.summary()}", {"extent": extent,
+                                                                         "loss": [run.first, run.last]})
+
+

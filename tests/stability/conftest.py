@@ -1,0 +1,16 @@
+"""One CaseContext per test session: the quick settings of `livescene stability --quick`, tiny scenes shared."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from stages.stability import CaseContext
+
+
+@pytest.fixture(scope="session")
+def stability_ctx(tmp_path_factory) -> CaseContext:
+    threads = torch.get_num_threads()
+    ctx = CaseContext(tmp_path_factory.mktemp("stability"), quick=True, threads=1)
+    yield ctx
+    torch.set_num_threads(threads)

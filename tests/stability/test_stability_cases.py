@@ -1,0 +1,35 @@
+"""Every registered stability case, run exactly as `livescene stability --quick` runs it.
+
+A case skipped because its stage is not in the tree (or there is no GPU) is a
+pytest skip with the case's reason; a case that documents a gap another stage
+still has to close is an xfail naming the request (see KNOWN_GAPS).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from stages.stability import CASES, run_case
+
+KNOWN_GAPS = {
+    "states_outside_unit_range": "read_scene does not clamp out-of-range states or warn (asked in "
+                                 "/work/brief/requests.md, 18:58, stability -> lead)",
+}
+"""Cases that fail because an owning stage lacks the behaviour; each names where it was asked for."""
+
+
+def _params():
+    for name, c in CASES.items():
+        marks = [pytest.mark.stability]
+        if name in KNOWN_GAPS:
+            marks.append(pytest.mark.xfail(reason=KNOWN_GAPS[name], strict=False))
+        yield pytest.param(c, id=name, marks=marks)
+
+
+@pytest.mark.parametrize("stability_case", list(_params()))
+def test_case(stability_case, stability_ctx):
+    row = run_case(stability_case, stability_ctx)
+    if row.result == "skip":
+        pytest.skip(row.detail)
+    assert row.result == "pass", f"{row.name}: {row.result}: {row.detail}"
+    assert row.metric and row.metric != "-"
