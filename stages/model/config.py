@@ -231,7 +231,7 @@ class TrainConfig:
     lr_final_ratio: float = 0.0
     """Learning rate at the last step relative to the peak (cosine decay)."""
     mixed_precision: str = "auto"
-    """'auto' (bf16 autocast on CUDA where supported, off on CPU), 'bf16', 'fp16' or 'off'."""
+    """'auto' (bf16 autocast on CUDA where supported, else fp16; off on CPU), or 'bf16' / 'fp16' (any device), 'off'."""
     eval_every: int = 500
     """Held-out PSNR every this many steps (0 = never)."""
     eval_rays: int = 4096
