@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +21,14 @@ class FrameTable:
     source_index: np.ndarray
     """``int64 [n]`` index of each frame in the source video, strictly increasing."""
     path: Path
+    source_frame_count: int | None = None
+    """Frames the source video holds (frames.json of the frames stage), when known."""
+
+    def in_source(self, index: int) -> bool:
+        """Whether ``index`` is a frame of the source video, extracted or not."""
+        if self.source_frame_count is None:
+            return bool((self.source_index == index).any())
+        return 0 <= index < self.source_frame_count
 
     def stem_of(self, index: int) -> str:
         """The image stem of the frame with this source index (``frame_{i:05d}`` when not extracted)."""
@@ -54,4 +63,16 @@ def read_frame_table(path: str | Path) -> FrameTable:
     if dup.size:
         raise StateError(path, f"source_index {int(src[dup[0]])} appears twice", "list every source frame once")
     names = tuple(str(table["frame"].iloc[i]) for i in order)
-    return FrameTable(names=names, source_index=src, path=path)
+    return FrameTable(names=names, source_index=src, path=path, source_frame_count=_source_frame_count(path))
+
+
+def _source_frame_count(frames_csv: Path) -> int | None:
+    """Decoded frame count from frames.json beside frames.csv: key frames between extracted frames are valid."""
+    summary = frames_csv.with_name("frames.json")
+    if not summary.is_file():
+        return None
+    try:
+        count = json.loads(summary.read_text()).get("decoded_frame_count")
+    except (json.JSONDecodeError, AttributeError):
+        return None
+    return int(count) if isinstance(count, int) and count > 0 else None

@@ -63,17 +63,18 @@ def check_key_values(config: StatesConfig, ann: Annotations, frames: FrameTable,
                      objects: list[str] | None) -> dict[str, dict[int, KeyValue]]:
     """Group values by object and frame; reject unknown objects, conflicts, missing frames, unannotated objects."""
     names_file = config.mapping or (ann.path.with_name("mapping.yml") if ann.format == "conerf" else None)
-    extracted = set(frames.source_index.tolist())
     grouped: dict[str, dict[int, KeyValue]] = {}
     for kv in ann.values:
         if objects is not None and kv.object not in objects:
             raise StateError(ann.path, f"row {kv.row}: unknown object {kv.object!r} (objects of {names_file}: "
                              f"{objects})", "fix the name or add the object to the name table")
-        if kv.source_index not in extracted and not config.allow_missing_frames:
+        # a key frame between extracted frames (subsampled video) still pins the curve; one outside the video cannot
+        if not frames.in_source(kv.source_index) and not config.allow_missing_frames:
+            known = (f"the source video has frames 0..{frames.source_frame_count - 1}" if frames.source_frame_count
+                     else f"source indices {int(frames.source_index[0])}..{int(frames.source_index[-1])}")
             raise StateError(ann.path, f"row {kv.row}: key frame {kv.source_index} ({kv.object}) is a frame that "
-                             f"does not exist in {frames.path} (source indices {int(frames.source_index[0])}.."
-                             f"{int(frames.source_index[-1])})",
-                             "annotate an extracted frame, re-extract keeping it, or pass --allow-missing-frames")
+                             f"does not exist in {frames.path} ({known})",
+                             "fix the frame index, re-extract the frames, or pass --allow-missing-frames")
         seen = grouped.setdefault(kv.object, {}).get(kv.source_index)
         if seen is not None and seen.value != kv.value:
             raise StateError(ann.path, f"rows {seen.row} and {kv.row}: key frame {kv.source_index} of {kv.object!r} "

@@ -72,6 +72,17 @@ def test_key_frame_for_a_frame_that_was_not_extracted(tmp_path):
     assert summary["n_key_frames"]["door"] == 2
 
 
+def test_key_frame_between_extracted_frames_counts_when_the_video_holds_it(tmp_path):
+    """frames.json says the video had 40 frames: frame 15 was skipped by subsampling, not invented."""
+    (tmp_path / "frames.json").write_text('{"decoded_frame_count": 40}')
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n15,door,1\n")
+    assert run(tmp_path, keys)["n_key_frames"]["door"] == 2
+    beyond = write_text(tmp_path / "beyond.csv", "frame,object,value\n0,door,0\n40,door,1\n")
+    with pytest.raises(StateError, match=r"beyond\.csv: row 3: key frame 40 \(door\) is a frame that does not exist "
+                                         r"in .*frames\.csv \(the source video has frames 0\.\.39\)"):
+        run(tmp_path, beyond)
+
+
 def test_object_never_annotated(tmp_path):
     mapping = write_text(tmp_path / "mapping.yaml", MAPPING)
     keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10,door,1\n")
