@@ -48,6 +48,11 @@ def rotation_from_quaternion_wxyz(q: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle_deg(r_a: np.ndarray, r_b: np.ndarray) -> float:
-    """Geodesic angle between two rotations, in degrees."""
-    cos = (np.trace(np.asarray(r_a).T @ np.asarray(r_b)) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    """Geodesic angle between two rotations, in degrees.
+
+    Taken from the rotation vector of ``r_a^T r_b`` rather than ``arccos`` of the trace, which loses
+    precision for the small angles a pose error report is about.
+    """
+    from scipy.spatial.transform import Rotation
+
+    return float(np.degrees(Rotation.from_matrix(np.asarray(r_a).T @ np.asarray(r_b)).magnitude()))

@@ -1,0 +1,66 @@
+"""The quality gate: too few frames, a still camera, or frames that do not register fail with advice."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from poses_testdata import orbit_poses, write_sequence
+
+from stages.poses import PosesConfig, StaticCameraError, estimate_poses
+from stages.poses.cli import main
+from stages.poses.quality_gate import compact_names
+from stages.scene import InputError
+
+
+def test_too_short_sequence(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_sequence(tmp_path / "frames", orbit_poses(2))
+    out = tmp_path / "poses"
+    assert main(["--frames", str(tmp_path / "frames"), "--out", str(out), "--threads", "2", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "only 2 frame(s); structure from motion needs at least 3" in err and "--stride 1" in err
+    assert not out.exists()
+
+
+def test_static_camera_is_reported_as_such(tmp_path: Path) -> None:
+    pose = orbit_poses(5)[2]
+    write_sequence(tmp_path / "frames", [pose] * 6, noise_std=2.0)
+    out = tmp_path / "poses"
+    with pytest.raises(StaticCameraError) as info:
+        estimate_poses(PosesConfig(frames_dir=tmp_path / "frames", out_dir=out, threads=2, progress=False))
+    message = str(info.value)
+    assert "the camera does not move" in message and "move the camera through the room" in message
+    assert not out.exists()
+
+
+def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """8 frames of the room, then 4 of a room with other textures (nothing matches them): 67% < 80%."""
+    frames = tmp_path / "frames"
+    write_sequence(frames, orbit_poses(8))
+    other = tmp_path / "other"
+    write_sequence(other, orbit_poses(4, arc_deg=20), source_indices=[8, 9, 10, 11], seed=7)
+    for png in (other / "images").iterdir():
+        shutil.copy(png, frames / "images" / png.name)
+    out = tmp_path / "poses"
+    code = main(["--frames", str(frames), "--out", str(out), "--threads", "2", "--seed", "0", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.startswith(f"error: {frames}: only 8 of 12 frames (67%) received a pose, below the required 80%")
+    assert "unregistered frames: frame_00008..frame_00011 (4)" in err
+    assert "--matcher exhaustive" in err and "overlap" in err and "sharper frames" in err
+    assert not out.exists()
+    # a lower bar accepts the partial model and records what is missing
+    summary = estimate_poses(PosesConfig(frames_dir=frames, out_dir=out, threads=2, min_registered=0.6,
+                                         progress=False))
+    assert summary["unregistered"] == [f"frame_{i:05d}.png" for i in range(8, 12)]
+
+
+def test_compact_names() -> None:
+    names = [f"frame_{i:05d}.png" for i in (3, 4, 5, 9, 11, 12)]
+    assert compact_names(names) == "frame_00003..frame_00005 (3), frame_00009, frame_00011..frame_00012 (2)"
+
+
+def test_missing_frames_folder(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="frames folder not found"):
+        estimate_poses(PosesConfig(frames_dir=tmp_path / "nowhere", out_dir=tmp_path / "o", progress=False))
