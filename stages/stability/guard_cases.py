@@ -1,1 +1,166 @@
-"""Training guards: a non-finite loss or gradient skips the step, says which term and where, stops after N."""
+"""Training guards: a non-finite loss or gradient skips the step, says which term and where, stops after N in a
+row, and never writes a checkpoint holding NaN."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import math
+from pathlib import Path
+
+import torch
+
+from .brief_training import make_trainer
+from .case_context import CaseContext
+from .case_registry import CaseFailed, Outcome, case, require, require_module
+from .tiny_scenes import hand_built_dataset
+
+
+def _dataset(ctx: CaseContext) -> Path:
+    return ctx.cached("guards-dataset", lambda: hand_built_dataset(ctx.folder("guards-ds") / "ds").root)
+
+
+def _poison_loss(trainer, term: str, on_steps: set[int] | None) -> None:
+    """Make ``term`` NaN on ``on_steps`` (None = every step) by wrapping the model's loss_dict."""
+    original = trainer.model.loss_dict
+
+    def loss_dict(out, batch, step, language=None):
+        terms = original(out, batch, step, language)
+        if on_steps is None or step in on_steps:
+            terms[term] = terms[term] * float("nan")
+        return terms
+
+    trainer.model.loss_dict = loss_dict
+
+
+def _params(model: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+
+@case("nonfinite_loss_skipped", "guards",
+      "a NaN loss term skips the step without touching the weights or the optimiser, the log line names the "
+      "term and the step, the streak resets after a good step and training goes on to a finite model")
+def nonfinite_loss_skipped(ctx: CaseContext) -> Outcome:
+    require_module("stages.model", "model, issue 6")
+    trainer = make_trainer(_dataset(ctx), ctx.folder("guard-loss"), steps=8)
+    _poison_loss(trainer, "focal_mask", {3, 4})
+    log = io.StringIO()
+    skipped, before_skip = [], None
+    with contextlib.redirect_stderr(log):
+        for _ in range(8):
+            if trainer.step == 3:
+                before_skip = _params(trainer.model)
+            result = trainer.train_step()
+            if result is None:
+                skipped.append(trainer.step)
+                require(trainer.nonfinite_streak == len(skipped), f"streak {trainer.nonfinite_streak} after "
+                                                                  f"{len(skipped)} skipped steps")
+            elif skipped:
+                require(trainer.nonfinite_streak == 0, "the streak did not reset after a finite step")
+            if trainer.step == 4 and before_skip is not None:
+                after = _params(trainer.model)
+                changed = [k for k in before_skip if not torch.equal(before_skip[k], after[k])]
+                require(not changed, f"a skipped step changed the weights {changed[:3]}")
+            trainer.step += 1
+    require(skipped == [3, 4], f"skipped steps {skipped}, expected [3, 4]")
+    said = log.getvalue()
+    for step in skipped:
+        line = next((s for s in said.splitlines() if s.startswith(f"step {step}:")), "")
+        require("focal_mask" in line, f"the log of skipped step {step} does not name the term: {line!r}")
+    require(all(bool(torch.isfinite(p).all()) for p in trainer.model.parameters()), "weights not finite at the end")
+    first = next(s for s in said.splitlines() if s.startswith("step 3:"))
+    return Outcome(f"steps {skipped} skipped, weights untouched; log: {first.strip()!r}",
+                   {"skipped_steps": skipped})
+
+
+@case("nonfinite_gradient_skipped", "guards",
+      "a NaN gradient (finite loss) skips the step, the log names the step and the parameter it appeared in")
+def nonfinite_gradient_skipped(ctx: CaseContext) -> Outcome:
+    require_module("stages.model", "model, issue 6")
+    trainer = make_trainer(_dataset(ctx), ctx.folder("guard-grad"), steps=4)
+    name, param = next((n, p) for n, p in trainer.model.named_parameters() if n.startswith("field.density_mlp"))
+    poison = {"on": False}
+    param.register_hook(lambda g: g * float("nan") if poison["on"] else g)
+    log = io.StringIO()
+    with contextlib.redirect_stderr(log):
+        results = []
+        for step in range(4):
+            poison["on"] = step == 2
+            results.append(trainer.train_step())
+            trainer.step += 1
+    require([r is None for r in results] == [False, False, True, False],
+            f"skipped pattern {[r is None for r in results]}, expected only step 2")
+    line = next((s for s in log.getvalue().splitlines() if s.startswith("step 2:")), "")
+    require("gradient" in line, f"the log of step 2 does not say the gradient was non-finite: {line!r}")
+    require(name in line or name.rsplit(".", 1)[0] in line,
+            f"the log of step 2 does not name the parameter with the NaN gradient ({name}): {line!r}")
+    return Outcome(f"step 2 skipped; log: {line.strip()!r}", {"parameter": name})
+
+
+@case("nonfinite_streak_stops", "guards",
+      "after train.max_nonfinite consecutive non-finite steps training stops with TrainingDiverged naming the "
+      "term; every checkpoint is finite and those written during the streak hold the last good weights; no "
+      "model.pt or run.json appears")
+def nonfinite_streak_stops(ctx: CaseContext) -> Outcome:
+    require_module("stages.model", "model, issue 6")
+    from stages.model import TrainingDiverged
+
+    out = ctx.folder("guard-streak")
+    trainer = make_trainer(_dataset(ctx), out, steps=20, overrides=["train.max_nonfinite=3",
+                                                                     "train.checkpoint_every=2"])
+    _poison_loss(trainer, "rgb", set(range(4, 100)))
+    log = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(log):
+            trainer.train()
+    except TrainingDiverged as exc:
+        message = str(exc)
+    else:
+        raise CaseFailed("training with a NaN loss on every step from step 4 did not stop")
+    require("3 consecutive" in message and "rgb" in message,
+            f"the stop message does not give the count and the term: {message!r}")
+    ckpts = sorted((out / "checkpoints").glob("step_*.pt"))
+    steps = [int(p.stem.split("_")[1]) for p in ckpts]
+    require(bool(ckpts), "no checkpoint was written before training stopped")
+    states = {s: torch.load(p, map_location="cpu", weights_only=False)["model"] for s, p in zip(steps, ckpts,
+                                                                                               strict=True)}
+    for s, state in states.items():
+        require(all(bool(torch.isfinite(v).all()) for v in state.values() if v.is_floating_point()),
+                f"checkpoint of step {s} holds non-finite weights")
+    last_good = max(s for s in steps if s <= 4)
+    for s in (s for s in steps if s > last_good):  # skipped steps must not have moved the weights
+        same = all(torch.equal(states[s][k], states[last_good][k]) for k in states[s])
+        require(same, f"checkpoint of step {s} (after the NaN steps began) differs from step {last_good}'s weights")
+    require(not (out / "model.pt").exists() and not (out / "run.json").exists(),
+            "a diverged run wrote model.pt or run.json")
+    return Outcome(f"stopped at step {trainer.step}: {message[:90]!r}; checkpoints {steps} finite",
+                   {"stopped_at": trainer.step, "checkpoints": steps})
+
+
+@case("no_nan_checkpoint", "guards",
+      "saving a checkpoint of weights holding NaN is refused with TrainingDiverged and leaves the checkpoints "
+      "already on disk byte-identical")
+def no_nan_checkpoint(ctx: CaseContext) -> Outcome:
+    require_module("stages.model", "model, issue 6")
+    from stages.model import TrainingDiverged
+
+    out = ctx.folder("guard-ckpt")
+    trainer = make_trainer(_dataset(ctx), out, steps=4)
+    trainer.train_step()
+    trainer.step = 1
+    good = trainer.save_checkpoint(1.0)
+    digest = hashlib.sha256(good.read_bytes()).hexdigest()
+    with torch.no_grad():
+        next(trainer.model.parameters()).view(-1)[0] = math.nan
+    trainer.step = 2
+    try:
+        trainer.save_checkpoint(2.0)
+    except TrainingDiverged as exc:
+        message = str(exc)
+    else:
+        raise CaseFailed("a checkpoint of NaN weights was written")
+    files = sorted(p.name for p in (out / "checkpoints").iterdir())
+    require(files == [good.name], f"checkpoints folder holds {files} after the refused save")
+    require(hashlib.sha256(good.read_bytes()).hexdigest() == digest, "the earlier checkpoint changed")
+    return Outcome(f"refused: {message!r}", {"files": files})
