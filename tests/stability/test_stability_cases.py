@@ -16,6 +16,8 @@ KNOWN_GAPS = {
                                  "/work/brief/requests.md, 18:58, stability -> lead)",
     "nonfinite_gradient_skipped": "the trainer logs 'non-finite gradient' without naming the parameter (asked in "
                                   "/work/brief/requests.md, 19:08, stability -> model)",
+    "bad_workflow_config_wrong_type": "snakemake's schema error names common.smk and the key but not the config "
+                                      "file (asked in /work/brief/requests.md, 19:20, stability -> workflow)",
 }
 """Cases that fail because an owning stage lacks the behaviour; each names where it was asked for."""
 
