@@ -29,6 +29,8 @@ def _estimate_parser() -> argparse.ArgumentParser:
     p.add_argument("--vocab-tree", type=Path, help="COLMAP vocabulary tree: enables loop detection")
     p.add_argument("--threads", type=int, default=d.threads, help="CPU threads (-1 = all)")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed")
+    p.add_argument("--parallel-extraction", action="store_true",
+                   help="extract features on all --threads (faster, but runs are no longer bit-identical)")
     p.add_argument("--min-registered", type=float, default=d.min_registered,
                    help="quality gate: minimum fraction of frames that must get a pose")
     p.add_argument("--camera-model", default=d.camera_model,
@@ -79,10 +81,13 @@ def _estimate(argv: list[str]) -> int:
         raise InputError(Path("--min-registered"), f"{a.min_registered} is not a fraction", "give a value in [0, 1]")
     cfg = PosesConfig(frames_dir=a.frames, out_dir=a.out, masks_dir=a.masks, matcher=a.matcher,
                       sequential_overlap=a.overlap, vocab_tree=a.vocab_tree, threads=a.threads, seed=a.seed,
+                      deterministic=not a.parallel_extraction,
                       min_registered=a.min_registered, camera_model=a.camera_model, max_image_size=a.max_image_size,
                       max_num_features=a.max_features, mask_dilate_px=a.mask_dilate, keep_database=a.keep_database,
                       progress=not a.no_progress, verbose=a.verbose)
     s = estimate_poses(cfg)
+    for warning in s["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
     t = s["timings"]
     print(f"registered {s['n_registered']}/{s['n_frames']} frames ({s['registered_fraction']:.1%}), "
           f"{s['n_points3D']} points, reprojection error {s['mean_reprojection_error']:.3f} px, "

@@ -32,6 +32,9 @@ class PosesConfig:
     """CPU threads for extraction, matching and mapping (-1 = all cores)."""
     seed: int = 0
     """Random seed for RANSAC and the mapper (results repeat for a fixed seed and thread count)."""
+    deterministic: bool = True
+    """Extract features on one thread so that a fixed seed gives identical poses run after run (matching and
+    mapping still use ``threads``); False extracts in parallel, a little faster, results vary slightly."""
     min_registered: float = 0.8
     """Quality gate: smallest accepted fraction of frames with a pose."""
     camera_model: str = "SIMPLE_RADIAL"

@@ -18,7 +18,7 @@ from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
 from .frame_list import read_frame_list
 from .model_export import point_cloud, registered_poses, scene_box, transforms_dict, write_ply
-from .quality_gate import check_baseline, check_motion, check_registration
+from .quality_gate import check_baseline, check_motion, check_registration, intrinsics_warnings
 from .sfm import run_sfm
 
 STAGE_VERSION = "1"
@@ -80,6 +80,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         sparse.mkdir(parents=True)
         rec.write(output_dir=sparse)
         transforms = transforms_dict(rec, frames.source_index)
+        warnings_ = intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
         write_json(out / "transforms.json", transforms)
         cloud = point_cloud(rec)
         write_ply(cloud, out / "points3D.ply")
@@ -120,10 +121,12 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
                 "dilate_px": mask_stats.dilate_px,
             },
             "config": {"matcher": cfg.matcher, "threads": cfg.threads, "seed": cfg.seed,
+                       "deterministic": cfg.deterministic,
                        "min_registered": cfg.min_registered, "camera_model": cfg.camera_model,
                        "max_image_size": cfg.max_image_size, "max_num_features": cfg.max_num_features,
                        "sequential_overlap": cfg.sequential_overlap,
                        "loop_detection": cfg.vocab_tree is not None},
+            "warnings": warnings_,
             "timings": timings,
         }
         write_json(out / "poses.json", summary)

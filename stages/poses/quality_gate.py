@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from stages.scene import frame_id_of
@@ -86,3 +87,22 @@ def check_registration(names: list[str], registered: set[str], min_fraction: flo
             REGISTRATION_ADVICE + " (or lower --min-registered if a partial model is acceptable)",
         )
     return fraction
+
+
+def intrinsics_warnings(fx: float, fy: float, width: int, height: int) -> list[str]:
+    """Signs of an under-constrained camera that the registration gate cannot see.
+
+    With a separate fy (PINHOLE, OPENCV) and a camera that only moves sideways,
+    bundle adjustment can drift fy far from fx while the reprojection error
+    stays small: every frame registers, but the intrinsics are useless.
+    """
+    out = []
+    if not 0.8 <= fx / fy <= 1.25:
+        out.append(f"fx = {fx:.1f} px and fy = {fy:.1f} px differ by more than 25%: the camera model is "
+                   "under-constrained by this motion; use --camera-model SIMPLE_RADIAL or SIMPLE_PINHOLE "
+                   "(one focal length)")
+    fov = 2 * math.degrees(math.atan(0.5 * width / fx))
+    if not 20.0 <= fov <= 150.0:
+        out.append(f"the estimated horizontal field of view is {fov:.0f} degrees, outside 20..150: check the "
+                   "focal length before using these poses")
+    return out

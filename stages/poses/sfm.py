@@ -55,7 +55,10 @@ def extract_features(cfg: PosesConfig, database: Path, image_dir: Path, names: l
     reader = pycolmap.ImageReaderOptions(camera_model=cfg.camera_model)
     if mask_dir is not None:
         reader.mask_path = str(mask_dir)
-    extraction = pycolmap.FeatureExtractionOptions(num_threads=cfg.threads, max_image_size=cfg.max_image_size,
+    # COLMAP numbers images in the order extractor threads finish them; image ids steer pair order, RANSAC
+    # seeds and the mapper's choices, so parallel extraction makes runs differ. One thread keeps them identical.
+    threads = 1 if cfg.deterministic else cfg.threads
+    extraction = pycolmap.FeatureExtractionOptions(num_threads=threads, max_image_size=cfg.max_image_size,
                                                    use_gpu=False)
     extraction.sift.max_num_features = cfg.max_num_features
     pycolmap.extract_features(database_path=database, image_path=image_dir, image_names=names,

@@ -36,7 +36,7 @@ def test_outputs_follow_the_contract(room_poses: Path, room_sequence: Room) -> N
     assert summary["registered"] == names and summary["matcher"] == "exhaustive"
     assert summary["mean_reprojection_error"] < 1.0 and summary["n_points3D"] > 100
     assert {"extract", "match", "map", "total"} <= set(summary["timings"])
-    assert summary["masks"]["frames_with_masks"] == len(names)
+    assert summary["masks"]["frames_with_masks"] == len(names) and summary["warnings"] == []
     assert {p.name for p in (room_poses / "sparse" / "0").iterdir()} >= {"cameras.bin", "images.bin",
                                                                           "points3D.bin"}
     assert not (room_poses / "colmap_work").exists()

@@ -10,7 +10,7 @@ from poses_testdata import orbit_poses, write_sequence
 
 from stages.poses import PosesConfig, StaticCameraError, estimate_poses
 from stages.poses.cli import main
-from stages.poses.quality_gate import compact_names
+from stages.poses.quality_gate import compact_names, intrinsics_warnings
 from stages.scene import InputError
 
 
@@ -64,3 +64,11 @@ def test_compact_names() -> None:
 def test_missing_frames_folder(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="frames folder not found"):
         estimate_poses(PosesConfig(frames_dir=tmp_path / "nowhere", out_dir=tmp_path / "o", progress=False))
+
+
+def test_intrinsics_warnings() -> None:
+    assert intrinsics_warnings(100.0, 102.0, 160, 120) == []
+    (warning,) = intrinsics_warnings(80.0, 877.0, 96, 72)
+    assert "differ by more than 25%" in warning and "SIMPLE_RADIAL" in warning
+    (warning,) = intrinsics_warnings(5000.0, 5000.0, 160, 120)
+    assert "field of view is 2 degrees" in warning
