@@ -25,15 +25,21 @@ def all_pairs(n_dims: int) -> list[tuple[int, int]]:
     return list(itertools.combinations(range(n_dims), 2))
 
 
-def sample_plane(plane: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
-    """Bilinear sample of ``plane`` [1, C, H, W] at ``coords`` [N, 2] in [-1, 1] (x -> W, y -> H) -> [N, C].
+def sample_plane_cn(plane: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
+    """Bilinear sample of ``plane`` [1, C, H, W] at ``coords`` [N, 2] in [-1, 1] (x -> W, y -> H) -> [C, N].
 
     ``align_corners=True``: -1 and 1 hit the first and last grid vertices, so a
-    plane of resolution R has R vertices spanning the box.
+    plane of resolution R has R vertices spanning the box. The [C, N] layout is
+    grid_sample's own (contiguous), so products of planes need no transposed copies.
     """
-    grid = coords.view(1, -1, 1, 2).to(plane.dtype)
+    grid = coords.reshape(1, -1, 1, 2).to(plane.dtype)
     out = F.grid_sample(plane, grid, mode="bilinear", padding_mode="border", align_corners=True)  # [1, C, N, 1]
-    return out[0, :, :, 0].transpose(0, 1)
+    return out[0, :, :, 0]
+
+
+def sample_plane(plane: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
+    """Bilinear sample of ``plane`` [1, C, H, W] at ``coords`` [N, 2] in [-1, 1] (x -> W, y -> H) -> [N, C]."""
+    return sample_plane_cn(plane, coords).transpose(0, 1)
 
 
 class KPlanesEncoding(nn.Module):
@@ -84,10 +90,10 @@ class KPlanesEncoding(nn.Module):
         """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
         out: torch.Tensor | None = None
         for plane, (a, b) in zip(self.planes, self.pairs, strict=True):
-            f = sample_plane(plane, coords[:, [a, b]])
+            f = sample_plane_cn(plane, coords[:, [a, b]])
             out = f if out is None else out * f
         assert out is not None
-        return out
+        return out.transpose(0, 1)
 
 
 class MultiScaleKPlanes(nn.Module):

@@ -79,6 +79,7 @@ class RayDataset:
         if not frames:
             raise SceneError(ds.root / "transforms.json", "no frames to train on", "give the dataset train frames")
         self.ds, self.frames, self.norm, self.near_plane = ds, frames, norm, near_plane
+        self.need_states = need_states
         self.device = torch.device(device)
         cams = {(ds.camera_of(f).width, ds.camera_of(f).height) for f in frames}
         if len(cams) > 1:
@@ -131,7 +132,8 @@ class RayDataset:
         nears, fars = aabb_near_far(origins, dirs, self.near_plane)
         row, col = pix // self.width, pix % self.width
         rgb = self.images[f, row, col].float() / 255.0
-        rays = RayBundle(origins, dirs, nears, fars, self.states[f], self.times[f])
+        states = self.states[f] if self.need_states else None  # learned-state mode: the model supplies them
+        rays = RayBundle(origins, dirs, nears, fars, states, self.times[f])
         return RayBatch(rays, rgb, self.labels[f, row, col].long(), self.frame_index[f])
 
     def sample(self, n: int, generator: torch.Generator) -> RayBatch:

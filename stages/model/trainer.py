@@ -55,11 +55,21 @@ def resolve_device(name: str) -> torch.device:
 
 
 def autocast_dtype(setting: str, device: torch.device) -> torch.dtype | None:
-    """bf16 on CUDA where supported ('auto'), never on CPU."""
-    if device.type != "cuda" or setting == "off":
+    """The autocast dtype of a run, or None for float32.
+
+    'auto' is bf16 on CUDA where supported (else fp16) and off on the CPU, where
+    reduced precision is slower than float32 for these small ops. 'bf16' and
+    'fp16' force autocast on either device (CPU autocast runs the linear layers
+    in the reduced dtype; grid sampling, volume rendering and losses stay float32).
+    """
+    if setting == "off":
         return None
-    if setting in ("auto", "bf16"):
-        return torch.bfloat16 if torch.cuda.is_bf16_supported() else (torch.float16 if setting == "auto" else None)
+    if setting == "auto":
+        if device.type != "cuda":
+            return None
+        return torch.bfloat16 if torch.cuda.is_bf16_supported() else torch.float16
+    if setting == "bf16":
+        return torch.bfloat16
     if setting == "fp16":
         return torch.float16
     raise InputError("train.mixed_precision", f"unknown value {setting!r}", "use auto, bf16, fp16 or off")
@@ -93,11 +103,16 @@ def scene_info(ds: SceneDataset, config: RunConfig, language: LanguageTargets | 
                      language_levels=int(language.levels.numel()) if language else 0)
 
 
-def lr_factor(step: int, warmup: int, total: int, final_ratio: float) -> float:
-    """Linear warm-up to 1, then cosine decay to ``final_ratio`` at ``total`` steps."""
+def lr_factor(step: int, warmup: int, total: int, final_ratio: float, time_fraction: float = 0.0) -> float:
+    """Linear warm-up to 1, then cosine decay to ``final_ratio``.
+
+    The decay's progress is the larger of the step fraction and ``time_fraction``
+    (the share of a wall-clock budget already spent), so a run stopped by its
+    time budget on a slow machine still ends at a low learning rate.
+    """
     if warmup > 0 and step < warmup:
         return (step + 1) / warmup
-    progress = min(max(step - warmup, 0) / max(total - warmup, 1), 1.0)
+    progress = min(max(max(step - warmup, 0) / max(total - warmup, 1), time_fraction), 1.0)
     return final_ratio + (1.0 - final_ratio) * 0.5 * (1.0 + math.cos(math.pi * progress))
 
 
@@ -142,8 +157,10 @@ class Trainer:
         train_frames = self.ds.frames_in("train") or self.ds.frames
         test_frames = self.ds.frames_in("test") or train_frames
         near = cfg.model.sampling.near_plane
-        self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=mode == "given")
-        self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=mode == "given")
+        # learned-state mode: rays carry no states, so training AND the periodic evaluation use the learned ones
+        given = mode == "given"
+        self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=given)
+        self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=given)
         self.info = scene_info(self.ds, cfg, self.language)
         if mode == "learned" and not self.info.key_times:
             raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
@@ -154,9 +171,11 @@ class Trainer:
         params = [p for p in self.model.parameters() if p.requires_grad]
         self.optimizer = torch.optim.Adam(params, lr=cfg.train.lr, eps=cfg.train.adam_eps)
         t = cfg.train
+        self.time_fraction = 0.0  # share of train.max_seconds spent (0 without a budget); drives the decay too
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
-            self.optimizer, lambda s: lr_factor(s, t.warmup_steps, t.max_steps, t.lr_final_ratio))
-        self.scaler = torch.amp.GradScaler("cuda") if self.amp_dtype == torch.float16 else None
+            self.optimizer, lambda s: lr_factor(s, t.warmup_steps, t.max_steps, t.lr_final_ratio, self.time_fraction))
+        # fp16 has too few exponent bits for small gradients: scale the loss (bf16 needs no scaler)
+        self.scaler = torch.amp.GradScaler(self.device.type) if self.amp_dtype == torch.float16 else None
         self.ray_generator = torch.Generator().manual_seed(cfg.seed)
         self.jitter_generator = torch.Generator(device=self.device).manual_seed(cfg.seed + 1)
         eval_gen = torch.Generator().manual_seed(cfg.seed + 2)
@@ -232,7 +251,7 @@ class Trainer:
     def _autocast(self) -> Any:
         if self.amp_dtype is None:
             return torch.autocast(device_type=self.device.type, enabled=False)
-        return torch.autocast(device_type="cuda", dtype=self.amp_dtype)
+        return torch.autocast(device_type=self.device.type, dtype=self.amp_dtype)
 
     def train_step(self) -> dict[str, float] | None:
         """One optimisation step; None when it was skipped for a non-finite loss or gradient."""
@@ -337,6 +356,7 @@ class Trainer:
                 if self._stop_reason:
                     status = self._stop_reason
                     break
+                self.time_fraction = elapsed / max_seconds if max_seconds > 0 else 0.0
                 result = self.train_step()
                 self.step += 1
                 window_steps += 1
@@ -353,6 +373,8 @@ class Trainer:
                            "lr": self.scheduler.get_last_lr()[0], "eval_psnr": eval_psnr,
                            "rays_per_s": round(rays_per_s, 1), **result}
                     self.log_rows.append(row)
+                    if eval_psnr is not None:  # the log on disk follows the run, for plots of error vs time
+                        self._write_log()
                     if self.step % 10 == 0 or eval_psnr is not None:
                         post = {"loss": f"{result['loss']:.4f}", "rays/s": f"{rays_per_s:.0f}"}
                         if last_psnr is not None:
