@@ -1,0 +1,64 @@
+"""Mixed precision on the CPU, the learning-rate schedule with a time budget, learned-state evaluation."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from stages.model import Trainer
+from stages.model.trainer import autocast_dtype, lr_factor
+
+
+@pytest.mark.parametrize("precision", ["bf16", "fp16"])
+def test_cpu_autocast_trains_with_finite_losses(tiny_dataset, tmp_path, tiny_config, precision):
+    cfg = tiny_config(tiny_dataset.root, f"train.mixed_precision={precision}", steps=3)
+    trainer = Trainer(cfg, tmp_path / precision, device="cpu", progress=False)
+    assert trainer.amp_dtype == {"bf16": torch.bfloat16, "fp16": torch.float16}[precision]
+    assert (trainer.scaler is not None) == (precision == "fp16")
+    seen: list[torch.dtype] = []  # the field's first linear layer really runs in the reduced dtype
+    first = next(m for m in trainer.model.field.density_mlp.modules() if isinstance(m, torch.nn.Linear))
+    first.register_forward_hook(lambda m, i, o: seen.append(o.dtype))
+    trainer.train()
+    assert seen and set(seen) == {trainer.amp_dtype}
+    with (tmp_path / precision / "train_log.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3  # no step was skipped as non-finite
+    assert all(math.isfinite(float(r["loss"])) for r in rows)
+    assert all(bool(torch.isfinite(p).all()) for p in trainer.model.parameters())
+
+
+def test_autocast_setting():
+    cpu = torch.device("cpu")
+    assert autocast_dtype("auto", cpu) is None and autocast_dtype("off", cpu) is None
+    assert autocast_dtype("bf16", cpu) == torch.bfloat16 and autocast_dtype("fp16", cpu) == torch.float16
+    with pytest.raises(Exception, match="mixed_precision"):
+        autocast_dtype("fp8", cpu)
+
+
+def test_lr_warmup_cosine_and_time_budget():
+    assert lr_factor(0, 10, 100, 0.0) == pytest.approx(0.1)
+    assert lr_factor(9, 10, 100, 0.0) == pytest.approx(1.0)
+    assert lr_factor(10, 10, 100, 0.0) == pytest.approx(1.0)
+    assert lr_factor(55, 10, 100, 0.0) == pytest.approx(0.5)
+    assert lr_factor(100, 10, 100, 0.1) == pytest.approx(0.1)
+    # half the wall-clock budget spent early in the step budget: the decay is half way
+    assert lr_factor(20, 10, 1000, 0.0, time_fraction=0.5) == pytest.approx(0.5)
+    assert lr_factor(20, 10, 1000, 0.0, time_fraction=1.0) == pytest.approx(0.0, abs=1e-12)
+    assert lr_factor(5, 10, 1000, 0.0, time_fraction=0.9) == pytest.approx(0.6)  # warm-up is by step
+
+
+def test_learned_state_rays_carry_no_states_and_eval_uses_the_state_field(tiny_dataset, tmp_path, tiny_config):
+    cfg = tiny_config(tiny_dataset.root, "model.state.mode=learned", steps=1)
+    trainer = Trainer(cfg, tmp_path / "learned", device="cpu", progress=False)
+    batch = trainer.eval_rays.batch(torch.arange(8))
+    assert batch.rays.states is None and batch.rays.times is not None
+    trainer.model.eval()
+    expected = trainer.model.state_field(batch.rays.times)
+    torch.testing.assert_close(trainer.model.ray_states(batch.rays), expected)
+    given = Trainer(tiny_config(tiny_dataset.root, steps=1), tmp_path / "given", device="cpu", progress=False)
+    rays = given.eval_rays.batch(torch.arange(8)).rays
+    assert rays.states is not None and np.isfinite(rays.states.numpy()).all()
