@@ -72,8 +72,10 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         detail = "" if rec is not None else " (COLMAP found no pair of frames to start a model from)"
         if sfm.n_models > 1:
             detail += f" (the sequence broke into {sfm.n_models} separate models; the largest is kept)"
-        fraction = check_registration(names, registered, cfg.min_registered, cfg.frames_dir, detail)
-        assert rec is not None  # the gate rejects an empty result
+        # even with --min-registered 0 a model needs two posed frames to be a model at all
+        fraction = check_registration(names, registered, max(cfg.min_registered, 2 / len(names)), cfg.frames_dir,
+                                      detail)
+        assert rec is not None  # the gate above rejects an empty result
 
         t0 = time.perf_counter()
         sparse = out / "sparse" / "0"
