@@ -111,6 +111,9 @@ def test_missing_empty_and_garbage_videos(tmp_path: Path, capsys: pytest.Capture
     garbage.write_bytes(b"this is not a video" * 50)
     code, err = run_cli(capsys, "--video", str(garbage), "--out", str(out))
     assert code == 2 and "garbage.mp4: OpenCV cannot open it as a video" in err and "ffmpeg" in err
+    no_frames = write_video(tmp_path / "no_frames.avi", [], fourcc="MJPG")  # a valid container, zero frames
+    code, err = run_cli(capsys, "--video", str(no_frames), "--out", str(out))
+    assert code == 2 and "no_frames.avi: the video holds no frames" in err
     assert not out.exists()
 
 
