@@ -15,6 +15,7 @@ import hashlib
 import importlib
 import io
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -76,6 +77,8 @@ def expect_refusal(main: Callable[[list[str]], int], argv: list[str], folder: Pa
 
 
 def short(line: str, n: int = 110) -> str:
+    """The message without the scratch-folder prefix of its paths, cut to ``n`` characters for the table."""
+    line = re.sub(r"/\S*?/bad-[^/\s]+/", "", line)
     return line if len(line) <= n else line[: n - 3] + "..."
 
 

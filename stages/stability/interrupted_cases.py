@@ -3,6 +3,7 @@ weights bit-identical to an uninterrupted run of the same seed (CPU)."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -128,3 +129,100 @@ def sigkill_resume_bit_exact(ctx: CaseContext) -> Outcome:
     n = _compare(_straight_weights(ctx, data), out)
     return Outcome(f"killed after step {max(saved)}/{STEPS}; resumed: {n} weights bit-identical; "
                    f"{len(leftovers)} temp files left", {"last_checkpoint": max(saved), "temp_files": leftovers})
+
+
+SNAKEFILE = """\
+# Three rules, each one call of a stage CLI (as workflow/rules/*.smk do): capture -> dataset -> train.
+PY = {python!r}
+rule all:
+    input: "run/run.json"
+rule capture:
+    output: directory("capture")
+    shell: PY + " -m stages.cli capture --spec spec.yaml --out {{output}} --no-progress"
+rule dataset:
+    input: "capture"
+    output: directory("dataset")
+    shell: PY + " -m stages.cli capture dataset --capture {{input}} --out {{output}} --no-progress"
+rule train:
+    input: "dataset"
+    output: "run/run.json"
+    # --resume: a rerun after an interruption continues from run/checkpoints (and starts fresh when there are none)
+    shell: PY + " -c 'from stages.model.train_cli import main; raise SystemExit(main())' --data {{input}} --out run "
+           "--device cpu --max-steps {steps} --resume --no-progress {overrides}"
+"""
+
+
+def snapshot_files(root: Path) -> dict[str, float]:
+    """Modification time of every file under ``root`` by relative path (a rule that reruns rewrites them)."""
+    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file()}
+
+
+def _job_counts(dry_run_output: str) -> dict[str, int]:
+    """Rule -> job count from the 'Job stats' table of `snakemake -n`."""
+    counts: dict[str, int] = {}
+    lines = dry_run_output.splitlines()
+    start = next((i for i, s in enumerate(lines) if s.strip().startswith("Job stats")), None)
+    if start is None:
+        return counts
+    for s in lines[start + 1 :]:
+        parts = s.split()
+        if len(parts) == 2 and parts[1].isdigit() and parts[0] not in ("job", "total"):
+            counts[parts[0]] = int(parts[1])
+        elif counts and not s.strip():
+            break
+    return counts
+
+
+@case("snakemake_interrupt_reruns_incomplete", "interrupted",
+      "a Snakemake run of stage CLIs (capture -> dataset -> train --resume) stopped by SIGTERM during training "
+      "leaves the finished outputs intact and no train output; `snakemake -n` then plans only the train job, and "
+      "the rerun resumes from the last checkpoint, leaves capture and dataset untouched, and completes")
+def snakemake_interrupt_reruns_incomplete(ctx: CaseContext) -> Outcome:
+    require_module("stages.capture", "capture, issue 3")
+    require_module("stages.model", "model, issue 6")
+    from .tiny_scenes import capture_spec_data
+
+    root = ctx.folder("snakemake-interrupt")
+    spec = capture_spec_data("tiny", width=32, height=24, n_frames=6)
+    import yaml
+
+    (root / "spec.yaml").write_text(yaml.safe_dump(spec))
+    overrides = " ".join(f"--set {item}" for item in [*TINY_MODEL, "train.threads=1", "train.checkpoint_every=5"])
+    (root / "Snakefile").write_text(SNAKEFILE.format(python=sys.executable, overrides=overrides, steps=STEPS))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "1", "--quiet"], cwd=root, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    first_ckpt = root / "run" / "checkpoints" / "step_000005.pt"
+    deadline = time.monotonic() + 240
+    while not first_ckpt.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if proc.poll() is not None:
+        out, _ = proc.communicate()
+        raise CaseFailed(f"snakemake ended (rc {proc.returncode}) before training was under way: {out[-400:]}")
+    os.killpg(proc.pid, signal.SIGTERM)  # what a scheduler or Ctrl-C sends to the whole job
+    out, _ = proc.communicate(timeout=120)
+    require(proc.returncode != 0, "snakemake reported success after SIGTERM")
+    from stages.scene import read_scene
+
+    ds = read_scene(root / "dataset", validate=True)
+    require(not (root / "run" / "run.json").exists(), "the interrupted train rule left run/run.json")
+    partial = sorted(str(p.relative_to(root)) for p in root.rglob(".*") if p.is_file()
+                     and ".snakemake" not in p.parts and p.name != ".snakemake_timestamp")
+    require(not partial, f"temporary files left by the interrupted run: {partial[:3]}")
+    plan = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1"], cwd=root, env=env,
+                          capture_output=True, text=True, timeout=120)
+    counts = _job_counts(plan.stdout + plan.stderr)
+    require(counts.get("train") == 1 and "capture" not in counts and "dataset" not in counts,
+            f"after the interruption snakemake plans {counts or (plan.stdout + plan.stderr)[-300:]}, expected "
+            "only train")
+    finished = {k: v for k, v in snapshot_files(root).items() if k.startswith(("capture/", "dataset/"))}
+    done = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--quiet"], cwd=root, env=env,
+                          capture_output=True, text=True, timeout=300)
+    require(done.returncode == 0, f"the rerun failed: {(done.stdout + done.stderr)[-400:]}")
+    after = {k: v for k, v in snapshot_files(root).items() if k.startswith(("capture/", "dataset/"))}
+    require(after == finished, "the rerun rewrote capture/ or dataset/ outputs")
+    run = json.loads((root / "run" / "run.json").read_text())
+    require(run["steps"] == STEPS, f"the rerun ended at step {run['steps']}, expected {STEPS}")
+    return Outcome(f"SIGTERM during training: dataset of {len(ds.frames)} frames intact, no run.json; rerun "
+                   f"planned {counts}, resumed and finished {run['steps']} steps",
+                   {"planned": counts, "steps": run["steps"]})

@@ -267,7 +267,7 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> Outcom
     for key in ("rgb", "depth", "accumulation", "logits"):
         require(bool(torch.isfinite(out[key]).all()), f"{dtype} autocast {key} not finite")
     rgb_err = float((out["rgb"].detach().float() - ref_rgb).abs().max())
-    loss_rel = abs(float(loss.detach()) - float(ref_loss.detach())) / max(abs(float(ref_loss)), 1e-12)
+    loss_rel = abs(float(loss.detach()) - float(ref_loss.detach())) / max(abs(float(ref_loss.detach())), 1e-12)
     tol = 0.05 if dtype == torch.bfloat16 else 0.01
     require(rgb_err < tol, f"{dtype} autocast rgb differs from float32 by {rgb_err:.3g} (> {tol})")
     samples = rays * model.config.sampling.num_samples
@@ -404,7 +404,8 @@ def _units_case(ctx: CaseContext, scale: float) -> Outcome:
     rel = max(abs(a - b) / max(abs(b), 1e-12) for a, b in zip(run.losses, metres.losses, strict=True))
     require(rel < 1e-3, f"{scale:g}x units train differently from metres: loss rel. difference {rel:.2e}")
     depth = render_held_out(run)
-    return Outcome(f"{run.summary()}; loss within {rel:.1e} of the same scene in metres",
+    extent = float(np.max(ds.scene_box[1] - ds.scene_box[0]))
+    return Outcome(f"box {extent:g} units; {run.summary()}; loss within {rel:.1e} of the same scene in metres",
                    {"loss": [run.first, run.last], "max_rel_loss_difference": rel, **depth})
 
 

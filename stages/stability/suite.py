@@ -14,7 +14,7 @@ import torch
 
 from . import bad_input_cases, guard_cases, interrupted_cases, numerics_cases  # noqa: F401  (register the cases)
 from .case_context import CaseContext
-from .case_registry import CASES, Case, CaseResult, run_case
+from .case_registry import CASES, GROUPS, Case, CaseResult, run_case
 
 SUMMARY_FORMAT = 1
 
@@ -27,7 +27,8 @@ def select(names: Iterable[str] | None = None, groups: Iterable[str] | None = No
         raise ValueError(f"unknown stability cases {unknown}; known: {sorted(CASES)}")
     chosen = [c for c in CASES.values() if (not names or c.name in names)]
     groups = list(groups or [])
-    return [c for c in chosen if not groups or c.group in groups]
+    chosen = [c for c in chosen if not groups or c.group in groups]
+    return sorted(chosen, key=lambda c: GROUPS.index(c.group))  # numerics first, as the table reads
 
 
 def run_suite(cases: list[Case], *, quick: bool = False, workdir: Path | None = None, device: str = "cpu",

@@ -22,9 +22,13 @@ KNOWN_GAPS = {
 """Cases that fail because an owning stage lacks the behaviour; each names where it was asked for."""
 
 
+SLOW = {"snakemake_interrupt_reruns_incomplete"}
+"""Cases that start several processes (snakemake, the stage CLIs): 20-40 s on the shared 2-core machine."""
+
+
 def _params():
     for name, c in CASES.items():
-        marks = [pytest.mark.stability]
+        marks = [pytest.mark.stability] + ([pytest.mark.slow] if name in SLOW else [])
         if name in KNOWN_GAPS:
             marks.append(pytest.mark.xfail(reason=KNOWN_GAPS[name], strict=False))
         yield pytest.param(c, id=name, marks=marks)
