@@ -8,8 +8,8 @@ work; ``python -m stages.<name>`` calls the same function.
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import sys
+from pathlib import Path
 
 # subcommand -> (module holding main(argv), one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -30,16 +30,15 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def module_file_exists(module: str) -> bool:
+    """Whether ``stages.x.y`` has its source file here, without importing ``stages.x`` (torch is slow to load)."""
+    root = Path(__file__).resolve().parent
+    parts = module.split(".")[1:]
+    return (root.joinpath(*parts).with_suffix(".py")).is_file() or (root.joinpath(*parts) / "__init__.py").is_file()
+
+
 def available() -> dict[str, tuple[str, str]]:
-    out = {}
-    for name, (module, help_) in COMMANDS.items():
-        try:
-            found = importlib.util.find_spec(module) is not None
-        except ModuleNotFoundError:
-            found = False
-        if found:
-            out[name] = (module, help_)
-    return out
+    return {name: entry for name, entry in COMMANDS.items() if module_file_exists(entry[0])}
 
 
 def usage(commands: dict[str, tuple[str, str]]) -> str:

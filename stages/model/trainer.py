@@ -273,9 +273,10 @@ class Trainer:
             self.scaler.unscale_(self.optimizer)
         else:
             loss.backward()
-        grads = [p.grad for p in self.model.parameters() if p.grad is not None]
-        if grads and not bool(torch.isfinite(torch.stack([g.float().norm() for g in grads])).all()):
-            return self._skip("non-finite gradient")
+        named = [(n, p.grad) for n, p in self.model.named_parameters() if p.grad is not None]
+        if named and not bool(torch.isfinite(torch.stack([g.float().norm() for _, g in named])).all()):
+            bad = [n for n, g in named if not bool(torch.isfinite(g).all())]
+            return self._skip(f"non-finite gradient in {', '.join(bad[:3])}" + (" ..." if len(bad) > 3 else ""))
         if self.scaler is not None:
             self.scaler.step(self.optimizer)
             self.scaler.update()

@@ -15,6 +15,7 @@ Layout (that of the published LiveScene sets, plus optional extensions)::
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -162,6 +163,7 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
         shared = camera_from_dict(data, tpath, "top level", image_hw)
 
     frames: list[Frame] = []
+    clamped: list[str] = []
     for i, fr in enumerate(frames_raw):
         where = f"frames[{i}]"
         if not isinstance(fr, dict):
@@ -185,6 +187,10 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
             if bad:
                 raise SceneError(tpath, f"{where}: state of {bad} is not finite",
                                  "re-run `livescene states` to interpolate the states")
+            outside = {k: v for k, v in state.items() if not 0.0 <= v <= 1.0}
+            if outside:  # the model's state axes span [0, 1]; beyond it the planes clamp silently
+                clamped.append(f"{fr['file_path']} {outside}")
+                state = {k: min(max(v, 0.0), 1.0) for k, v in state.items()}
         split = fr.get("split")
         if split is not None and split not in ("train", "test"):
             raise SceneError(tpath, f"{where}: split {split!r} is neither 'train' nor 'test'",
@@ -193,6 +199,10 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
         frames.append(Frame(file_path=str(fr["file_path"]), c2w=c2w, state=state, split=split, camera=cam,
                             source_index=None if src is None else int(src)))
     camera = shared or frames[0].camera  # type: ignore[assignment]
+    if clamped:
+        shown = "; ".join(clamped[:10]) + (f"; and {len(clamped) - 10} more" if len(clamped) > 10 else "")
+        warnings.warn(f"{tpath}: states outside [0, 1] clamped to [0, 1] in {len(clamped)} frame(s): {shown}; fix: "
+                      "re-run `livescene states` (it normalises key frames to [0, 1])", stacklevel=2)
 
     meta: dict[str, Any] = {}
     scene_box = None

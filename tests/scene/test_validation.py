@@ -126,3 +126,17 @@ def test_validate_cli_ok(tiny_dataset):
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert "6 frames" in proc.stdout
+
+
+def test_states_outside_unit_range_are_clamped_with_a_warning_naming_the_frame(tiny_dataset):
+    tpath = tiny_dataset.root / "transforms.json"
+    data = json.loads(tpath.read_text())
+    data["frames"][1]["state"]["object0"] = 1.3
+    data["frames"][4]["state"]["object2"] = -0.2
+    tpath.write_text(json.dumps(data))
+    with pytest.warns(UserWarning, match="clamped") as caught:
+        ds = read_scene(tiny_dataset.root)
+    said = str(caught[0].message)
+    assert data["frames"][1]["file_path"] in said and data["frames"][4]["file_path"] in said
+    assert ds.frames[1].state["object0"] == 1.0 and ds.frames[4].state["object2"] == 0.0
+    assert json.loads(tpath.read_text()) == data  # the input file is left as it was
