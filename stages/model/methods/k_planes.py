@@ -1,0 +1,35 @@
+"""K-Planes with time (METHOD.md section 8): the "no control" reference.
+
+The 4th coordinate is the normalised frame index ``2 t - 1`` instead of an
+object state, so the field reproduces the capture as a video in time but
+cannot set an object's state independently of the clock. Same six planes of
+(x, y, z, t), samplers, renderer, losses and trainer as LiveScene; the time
+axis has ``field.k_resolution`` cells (the K-Planes time regularisers, L1 to 1
+and second-difference smoothness, act on it through the shared k-plane losses).
+Rendering a frame needs its ``frame_index``: states given to ``render`` are
+ignored by the field (they still condition the kept probability field).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from . import register_method
+from .livescene import LiveSceneModel
+
+
+class KPlanesTimeModel(LiveSceneModel):
+    """K-Planes over (x, y, z, t)."""
+
+    def field_dims(self) -> tuple[int, list[tuple[int, int]] | None]:
+        return 4, None
+
+    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
+                    times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(x, y, z, 2 t - 1); ``k`` reports the frame time, ``u`` the probability field's object."""
+        _, u = self.probability_field.project(logits, states)
+        t = times.to(positions.dtype)
+        return torch.cat([positions, (2.0 * t - 1.0).unsqueeze(-1)], dim=-1), t, u
+
+
+register_method("k-planes", KPlanesTimeModel)
