@@ -12,10 +12,6 @@ import pytest
 from stages.stability import CASES, run_case
 
 KNOWN_GAPS = {
-    "states_outside_unit_range": "read_scene does not clamp out-of-range states or warn (asked in "
-                                 "/work/brief/requests.md, 18:58, stability -> lead)",
-    "nonfinite_gradient_skipped": "the trainer logs 'non-finite gradient' without naming the parameter (asked in "
-                                  "/work/brief/requests.md, 19:08, stability -> model)",
     "bad_workflow_config_wrong_type": "snakemake's schema error names common.smk and the key but not the config "
                                       "file (asked in /work/brief/requests.md, 19:20, stability -> workflow)",
 }
