@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from stages.scene import Frame, InputError, SceneDataset, atomic_dir, write_json
+from stages.scene import Camera, Frame, InputError, SceneDataset, atomic_dir, write_json
 
 from .metrics import Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
@@ -46,6 +46,9 @@ class EvaluateConfig:
     """Write PNGs (held-out renders, unseen model|truth pairs, grounding maps) for the report."""
     max_unseen_images: int = 12
     """How many unseen-combination model|truth pairs are saved as PNG."""
+    render_scale: float = 1.0
+    """Render and compare at this fraction of the dataset's image size (0.5 = a quarter of the rays on a CPU);
+    images are area-downscaled, masks sampled at pixel centres, the truth camera scaled alike."""
 
 
 def _evenly(items: list, n: int | None) -> list:
@@ -85,9 +88,32 @@ class Evaluator:
                              f"dataset's {dataset.objects}", "evaluate a run on the dataset it was trained on")
 
     # -- rendering ------------------------------------------------------------------------------------------
+    def _camera(self, frame: Frame) -> Camera:
+        """The dataset camera of a frame at the evaluation's render scale."""
+        cam = self.ds.camera_of(frame)
+        return cam if self.config.render_scale == 1.0 else cam.scaled(self.config.render_scale)
+
     def _render(self, frame: Frame, states: dict[str, float] | None) -> dict[str, np.ndarray]:
-        return self.run.render(self.ds.camera_of(frame), np.asarray(frame.c2w, float), states,
+        return self.run.render(self._camera(frame), np.asarray(frame.c2w, float), states,
                                frame_index=self.ds.frames.index(frame))
+
+    def _image(self, frame: Frame) -> np.ndarray:
+        """The dataset image at the render scale (area averaging, as a camera with larger pixels would see)."""
+        img = self.ds.load_image(frame)
+        cam = self._camera(frame)
+        if img.shape[:2] == (cam.height, cam.width):
+            return img
+        return cv2.resize(img, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
+
+    def _mask(self, frame: Frame) -> np.ndarray:
+        """The dataset's one-hot mask ``[H, W, alpha + 1]`` at the render scale (sampled at pixel centres)."""
+        mask = self.ds.load_mask(frame)
+        cam = self._camera(frame)
+        if mask.shape[:2] == (cam.height, cam.width):
+            return mask
+        rows = np.minimum(((np.arange(cam.height) + 0.5) * mask.shape[0] / cam.height).astype(int), mask.shape[0] - 1)
+        cols = np.minimum(((np.arange(cam.width) + 0.5) * mask.shape[1] / cam.width).astype(int), mask.shape[1] - 1)
+        return mask[rows][:, cols]
 
     # -- 1. held-out views ----------------------------------------------------------------------------------
     def held_out(self, out_dir: Path | None) -> tuple[dict[str, Any], list[tuple[Frame, dict[str, np.ndarray]]]]:
@@ -101,7 +127,7 @@ class Evaluator:
         # a learned-state run renders a held-out frame at the state it learned for that frame index (METHOD.md 6)
         learned = getattr(self.run, "state_mode", "given") == "learned"
         for frame in tqdm(frames, desc="held-out views", unit="view"):
-            gt = self.ds.load_image(frame)
+            gt = self._image(frame)
             t0 = time.perf_counter()
             out = self._render(frame, None if learned else frame.state)
             render_seconds += time.perf_counter() - t0
@@ -113,7 +139,7 @@ class Evaluator:
             kept.append((frame, {k: v for k, v in out.items() if k in ("probs", "language")}))
             if out_dir is not None and self.config.save_renders:
                 _to_png(out_dir / "renders" / f"{frame.frame_id}.png", rgb)
-        cam = self.ds.camera_of(frames[0])
+        cam = self._camera(frames[0])
         summary = {
             "views": records,
             "psnr": summarize([r["psnr"] for r in records]),
@@ -142,7 +168,7 @@ class Evaluator:
         saved = 0
         pose_sources = set()
         for frame in tqdm(views, desc="unseen combinations", unit="view"):
-            cam = self.ds.camera_of(frame)
+            cam = self._camera(frame)
             tcam = self.truth.camera_for(cam.width, cam.height)
             t_c2w, how = self.truth.pose_for(frame)
             pose_sources.add(how)
@@ -242,12 +268,12 @@ class Evaluator:
     def _grounding_masks(self, frames: list[Frame]) -> list[np.ndarray] | None:
         """Truth object masks ``[H, W, alpha + 1]`` per frame: the dataset's masks, else the truth renderer's ids."""
         if self.ds.has_masks:
-            return [self.ds.load_mask(f) for f in frames]
+            return [self._mask(f) for f in frames]
         if self.truth is None:
             return None
         out = []
         for f in frames:
-            cam = self.ds.camera_of(f)
+            cam = self._camera(f)
             ids = self.truth.renderer.render(self.truth.pose_for(f)[0], self.truth.state_for(f) or {},
                                              camera=self.truth.camera_for(cam.width, cam.height))["ids"]
             chans = [ids == self.truth.object_ids.get(o, -1) for o in self.ds.objects]
