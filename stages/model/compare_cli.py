@@ -1,7 +1,7 @@
 """``livescene compare``: train every method for the same wall-clock budget on one dataset and print one table.
 
     livescene compare --data DS --methods livescene mk-planes ... --budget-s 120 --out DIR
-    livescene compare --data DS --replay DIR/compare.json --out DIR2     # same steps, no clock: reproducible
+    livescene compare --data DS --replay DIR --out DIR2     # DIR's steps and schedule, no clock: reproducible
     livescene compare params --out results/params_vs_objects.csv [--scale cpu-demo] [--max-objects 10]
     livescene compare preset --method conerf --scale cpu-demo --out conerf.yaml   # for `livescene train --preset`
 
@@ -24,7 +24,6 @@ from .method_comparison import (
     format_table,
     method_preset,
     params_vs_objects,
-    replay_steps_from,
 )
 
 
@@ -43,8 +42,10 @@ def build_parser(prog: str = "livescene compare") -> argparse.ArgumentParser:
     p.add_argument("--eval-frames", type=int, default=4, help="held-out frames rendered per method (0 = all)")
     p.add_argument("--eval-scale", type=int, default=1,
                    help="render scored frames at 1/N resolution vs area-downsampled images (CPU shortcut; 1)")
-    p.add_argument("--replay", help="compare.json of an earlier comparison: train each method for its recorded "
-                                    "steps without the clock")
+    p.add_argument("--replay", help="output folder of an earlier comparison: train each method for its recorded "
+                                    "steps and learning-rate schedule, without the clock (bit-identical on CPU)")
+    p.add_argument("--in-process", action="store_true",
+                   help="train in this process instead of one process per method (peak memory is then shared)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="config override applied to every method (repeatable)")
     return p
@@ -89,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
                             scale=args.scale, seed=args.seed, device=args.device, max_steps=args.max_steps,
                             overrides=list(args.overrides), eval_frames=args.eval_frames,
                             eval_scale=args.eval_scale,
-                            replay_steps=replay_steps_from(args.replay) if args.replay else {})
+                            replay=args.replay or "", isolate=not args.in_process)
         table = compare_methods(cfg)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)

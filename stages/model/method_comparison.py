@@ -8,10 +8,12 @@ frames from every run and scores them with the evaluation stage's PSNR and
 SSIM. Per-method differences from the base preset live in
 ``config/model/methods/<method>.yaml`` (one overlay per preset scale).
 
-A wall-clock budget makes the step count depend on the machine's load, so the
-table records each method's steps; ``replay`` retrains every method for
-exactly those steps (same learning-rate schedule, same seed) with no clock,
-which on the CPU reproduces the budgeted runs bit for bit.
+A wall-clock budget makes the step count depend on the machine's load (and the
+trainer's learning-rate decay follows the spent share of the budget), so each
+budgeted run records its steps and, per step, the budget fraction the schedule
+saw (``time_fractions.json``); a replay retrains every method for exactly those
+steps with exactly that schedule and no clock, which on the CPU reproduces the
+budgeted runs bit for bit.
 """
 
 from __future__ import annotations
@@ -86,28 +88,55 @@ class TrainJob:
     overrides: list[str] = field(default_factory=list)
     seed: int = 0
     device: str = "cpu"
-    stop_at_step: int = 0
-    """0: train until max_steps or the time budget; N: stop after exactly N steps (replay)."""
+    replay: str = ""
+    """Empty: train until max_steps or the time budget. A run folder: replay its steps and schedule exactly."""
 
 
-class _StepLimitedTrainer(Trainer):
-    """Stops after ``stop_at_step`` steps through the trainer's own stop path (final eval, model.pt, run.json)."""
+TIME_FRACTIONS = "time_fractions.json"
+"""Per step, the share of the time budget the learning-rate schedule saw (written by every compare run)."""
 
-    stop_at_step = 0
+
+class _ReplayableTrainer(Trainer):
+    """Records the schedule's budget fraction of every step; in replay, feeds the recorded ones back and stops.
+
+    Stopping goes through the trainer's own stop path (final eval, model.pt, run.json).
+    """
+
+    def __init__(self, *args: Any, replay: list[float] | None = None, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.replay = replay
+        self.fractions: list[float] = []
 
     def train_step(self) -> dict[str, float] | None:
+        if self.replay is not None:
+            self.time_fraction = self.replay[self.step]
+        self.fractions.append(float(self.time_fraction))
         result = super().train_step()
-        if self.stop_at_step and self.step + 1 >= self.stop_at_step:
+        if self.replay is not None and self.step + 1 >= len(self.replay):
             self._stop_reason = "step_budget"
         return result
+
+
+def read_time_fractions(run_dir: str | Path) -> list[float]:
+    path = Path(run_dir) / TIME_FRACTIONS
+    try:
+        values = json.loads(path.read_text())
+        return [float(v) for v in values]
+    except (OSError, ValueError, TypeError) as exc:
+        raise InputError(path, f"cannot read the recorded schedule ({exc})",
+                         "replay a folder written by `livescene compare`") from exc
 
 
 def run_job(job: TrainJob) -> dict[str, Any]:
     """Train one method in this process; returns the run summary (run.json)."""
     config = load_config(job.preset, job.overrides, method=job.method, seed=job.seed, data=job.data)
-    trainer = _StepLimitedTrainer(config, job.out, device=job.device, progress=False)
-    trainer.stop_at_step = job.stop_at_step
-    return trainer.train()
+    replay = read_time_fractions(job.replay) if job.replay else None
+    if replay is not None and not replay:
+        raise InputError(Path(job.replay) / TIME_FRACTIONS, "records no steps", "replay a run that trained")
+    trainer = _ReplayableTrainer(config, job.out, device=job.device, progress=False, replay=replay)
+    summary = trainer.train()
+    write_json(Path(job.out) / TIME_FRACTIONS, trainer.fractions)
+    return summary
 
 
 def _train_in_child(job: TrainJob, log_path: Path) -> int:
@@ -182,8 +211,10 @@ class CompareConfig:
     """Held-out frames rendered per method for PSNR/SSIM (evenly spread over the test split; 0 = all)."""
     eval_scale: int = 1
     """Render the scored frames at 1/eval_scale resolution (targets area-downsampled alike)."""
-    replay_steps: dict[str, int] = field(default_factory=dict)
-    """Method -> exact step count (from a previous compare.json); when given, no clock is used."""
+    replay: str = ""
+    """Output folder of an earlier comparison: retrain each method for its recorded steps and schedule, no clock."""
+    isolate: bool = True
+    """Train each method in its own process (its own max RSS); False trains in this process (tests)."""
 
 
 def compare_methods(cfg: CompareConfig, progress: bool = True) -> pd.DataFrame:
@@ -200,20 +231,23 @@ def compare_methods(cfg: CompareConfig, progress: bool = True) -> pd.DataFrame:
         if (run_dir / "checkpoints").is_dir():
             raise InputError(run_dir, "already holds a run", "choose a new --out folder")
         overrides = [*method_overrides(method, cfg.scale), *cfg.overrides]
-        stop = int(cfg.replay_steps.get(method, 0))
-        if stop:
-            overrides.append("train.max_seconds=0")
-        else:
-            overrides.append(f"train.max_seconds={cfg.budget_s}")
+        replay = str(Path(cfg.replay) / method) if cfg.replay else ""
+        overrides.append(f"train.max_seconds={0 if replay else cfg.budget_s}")
         if cfg.max_steps > 0:
             overrides.append(f"train.max_steps={cfg.max_steps}")
         job = TrainJob(method=method, data=str(cfg.data), out=str(run_dir), preset=cfg.scale, overrides=overrides,
-                       seed=cfg.seed, device=cfg.device, stop_at_step=stop)
+                       seed=cfg.seed, device=cfg.device, replay=replay)
+        if replay:
+            read_time_fractions(replay)  # refuse a missing record before training anything
         t0 = time.perf_counter()
         if progress:
-            what = f"{stop} steps" if stop else f"{cfg.budget_s:.0f} s"
+            what = f"the steps of {replay}" if replay else f"{cfg.budget_s:.0f} s"
             print(f"[compare] training {method} for {what} ...", file=sys.stderr, flush=True)
-        rc = _train_in_child(job, out / f"{method}.log")
+        if cfg.isolate:
+            rc = _train_in_child(job, out / f"{method}.log")
+        else:
+            run_job(job)
+            rc = 0
         row: dict[str, Any] = {"method": method}
         run_json = run_dir / "run.json"
         if rc != 0 or not run_json.is_file():
@@ -238,7 +272,8 @@ def compare_methods(cfg: CompareConfig, progress: bool = True) -> pd.DataFrame:
     meta = {
         "data": str(cfg.data), "scale": cfg.scale, "budget_s": cfg.budget_s, "seed": cfg.seed,
         "device": cfg.device, "max_steps": cfg.max_steps, "overrides": cfg.overrides,
-        "eval_frames": cfg.eval_frames, "eval_scale": cfg.eval_scale, "replay": bool(cfg.replay_steps),
+        "eval_frames": cfg.eval_frames, "eval_scale": cfg.eval_scale, "replay": cfg.replay or None,
+        "isolated": cfg.isolate,
         "torch": torch.__version__, "peak_memory_kind": "process max RSS" if cfg.device == "cpu" else "cuda",
         "methods": [{k: _jsonable(v) for k, v in r.items()} for r in table.to_dict(orient="records")],
     }
@@ -252,17 +287,6 @@ def _jsonable(v: Any) -> Any:
     if isinstance(v, np.integer):
         return int(v)
     return v
-
-
-def replay_steps_from(compare_json: str | Path) -> dict[str, int]:
-    """Method -> steps of a previous comparison (to retrain without the clock)."""
-    path = Path(compare_json)
-    try:
-        data = json.loads(path.read_text())
-        return {m["method"]: int(m["steps"]) for m in data["methods"] if m.get("steps") is not None}
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputError(path, f"not a compare.json with per-method steps ({exc})",
-                         "pass the compare.json written by `livescene compare`") from exc
 
 
 def format_table(table: pd.DataFrame) -> str:

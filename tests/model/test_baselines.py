@@ -1,0 +1,178 @@
+"""Baselines on the shared harness: plane counts, parameter growth, gating, training, rendering, the comparison."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from stages.model import Trainer, build_model, load_config, load_run
+from stages.model.compare_cli import main as compare_main
+from stages.model.method_comparison import (
+    ALL_METHODS,
+    CompareConfig,
+    compare_methods,
+    method_overrides,
+    params_vs_objects,
+)
+from stages.model.methods import SceneInfo
+from stages.model.methods.mk_planes import mk_planes_pairs, mk_planes_star_pairs
+
+
+def _info(n_objects: int) -> SceneInfo:
+    return SceneInfo(objects=[f"o{i}" for i in range(n_objects)], n_frames=6)
+
+
+def _tiny_model_config(tiny_overrides):
+    return load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]"]).model
+
+
+@pytest.mark.parametrize("a", [1, 2, 5])
+def test_plane_counts_per_scale(a, tiny_overrides):
+    cfg = _tiny_model_config(tiny_overrides)
+    mk = build_model("mk-planes", cfg, _info(a))
+    star = build_model("mk-planes-star", cfg, _info(a))
+    assert len(mk.field.encoding.grids) == 2
+    for grid in mk.field.encoding.grids:
+        assert len(grid.planes) == math.comb(3 + a, 2)
+        assert grid.n_dims == 3 + a
+    for grid in star.field.encoding.grids:
+        assert len(grid.planes) == 3 + 3 * a
+    # the proposal grids factorise the same space
+    assert len(mk.proposal_fields[0].encoding.planes) == math.comb(3 + a, 2)
+    assert len(star.proposal_fields[0].encoding.planes) == 3 + 3 * a
+    # LiveScene stays at the six planes of (x, y, z, k)
+    live = build_model("livescene", cfg, _info(a))
+    assert [len(g.planes) for g in live.field.encoding.grids] == [6, 6]
+
+
+def test_star_pairs_couple_no_two_states():
+    assert mk_planes_star_pairs(2) == [(0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3), (0, 4), (1, 4), (2, 4)]
+    assert all(a < 3 for a, _ in mk_planes_star_pairs(5))
+    assert (3, 4) in mk_planes_pairs(2)
+
+
+def test_livescene_parameters_do_not_grow_with_objects(tiny_overrides):
+    cfg = _tiny_model_config(tiny_overrides)
+
+    def count(method: str, a: int) -> tuple[int, int]:
+        m = build_model(method, cfg, _info(a))
+        dec = m.probability_field.decoder
+        io_layers = sum(p.numel() for layer in (dec[0], dec[-1]) for p in layer.parameters())
+        total = sum(p.numel() for p in m.parameters())
+        return total - io_layers, sum(p.numel() for p in m.field.parameters())
+
+    live = [count("livescene", a) for a in (1, 2, 5)]
+    assert live[0] == live[1] == live[2]
+    mk = [count("mk-planes", a)[1] for a in (1, 2, 5)]
+    star = [count("mk-planes-star", a)[1] for a in (1, 2, 5)]
+    assert mk[0] < mk[1] < mk[2] and star[0] < star[1] < star[2]
+    assert mk[2] > star[2]  # quadratic versus linear growth
+
+
+def test_conerf_gates_attributes_by_mask(tiny_overrides):
+    model = build_model("conerf", _tiny_model_config(tiny_overrides), _info(2))
+    states = torch.tensor([[0.9, 0.2], [0.9, 0.2], [0.9, 0.2]])
+    logits = torch.tensor([[20.0, 0.0, 0.0], [0.0, 20.0, 0.0], [0.0, 0.0, 20.0]])  # object 0, object 1, background
+    gated = model.gated_attributes(logits, states)
+    assert torch.allclose(gated[0], torch.tensor([0.8, 0.0]), atol=1e-6)
+    assert torch.allclose(gated[1], torch.tensor([0.0, -0.6]), atol=1e-6)
+    assert torch.allclose(gated[2], torch.zeros(2), atol=1e-6)
+    # the gate is differentiable, so the photometric loss reaches the mask head as in CoNeRF
+    logits.requires_grad_(True)
+    model.gated_attributes(logits, states).sum().backward()
+    assert logits.grad is not None and float(logits.grad.abs().sum()) > 0
+
+
+def test_k_planes_reads_time_not_states(tiny_overrides):
+    model = build_model("k-planes", _tiny_model_config(tiny_overrides), _info(2))
+    pos = torch.zeros(4, 3)
+    logits = torch.zeros(4, 3)
+    t = torch.tensor([0.0, 0.25, 0.5, 1.0])
+    a, _, _ = model.coordinates(pos, torch.zeros(4, 2), logits, t)
+    b, _, _ = model.coordinates(pos, torch.ones(4, 2), logits, t)
+    assert torch.equal(a, b)
+    assert torch.allclose(a[:, 3], 2 * t - 1)
+
+
+@pytest.mark.parametrize("method", ["mk-planes", "mk-planes-star", "conerf", "k-planes"])
+def test_method_trains_and_renders(method, tiny_dataset, tiny_config, tmp_path):
+    out = tmp_path / method
+    config = tiny_config(tiny_dataset.root, f"method={method}", *method_overrides(method, "cpu-demo"), steps=3)
+    summary = Trainer(config, out, device="cpu", progress=False).train()
+    assert summary["method"] == method and summary["steps"] == 3
+    assert summary["params"]["total"] > 0 and summary["peak_memory_mib"] > 0
+    log = pd.read_csv(out / "train_log.csv")
+    assert len(log) == 3 and np.isfinite(log["loss"]).all()
+    run = load_run(out)
+    frame = tiny_dataset.frames[1]
+    img = run.render(tiny_dataset.camera, frame.c2w, frame.state, frame_index=1)
+    h, w = tiny_dataset.camera.height, tiny_dataset.camera.width
+    assert img["rgb"].shape == (h, w, 3) and np.isfinite(img["rgb"]).all()
+    assert img["probs"].shape == (h, w, 4)
+
+
+def test_conerf_learned_states_use_frame_latents(tiny_dataset, tiny_config, tmp_path):
+    config = tiny_config(tiny_dataset.root, "method=conerf", "model.state.mode=learned", steps=3)
+    trainer = Trainer(config, tmp_path / "run", device="cpu", progress=False)
+    assert type(trainer.model.state_field).__name__ == "FrameLatentStates"
+    assert trainer.model.state_field.latents.num_embeddings == len(tiny_dataset.frames)
+    trainer.train()
+    log = pd.read_csv(tmp_path / "run" / "train_log.csv")
+    assert (log["state_mse"] > 0).all()  # key frames supervise the regressed attributes
+    states = load_run(tmp_path / "run").learned_states()
+    assert states.shape == (len(tiny_dataset.frames), 3) and ((states > 0) & (states < 1)).all()
+
+
+def test_params_vs_objects_table():
+    table = params_vs_objects(ALL_METHODS, range(1, 4), "cpu-demo")
+    assert len(table) == 5 * 3
+    mk = table[table.method == "mk-planes"].set_index("objects")
+    assert mk.loc[3, "planes_per_scale"] == math.comb(6, 2)
+    star = table[table.method == "mk-planes-star"].set_index("objects")
+    assert star.loc[3, "planes_per_scale"] == 12
+    live = table[table.method == "livescene"].set_index("objects")
+    assert live["field_params"].nunique() == 1
+
+
+def test_compare_budget_then_replay_reproduces(tiny_dataset, tiny_overrides, tmp_path, capsys):
+    extra = [*tiny_overrides, "train.threads=1"]
+    cfg = CompareConfig(data=str(tiny_dataset.root), out=str(tmp_path / "a"), methods=["k-planes"], budget_s=1.0,
+                        max_steps=40, overrides=extra, eval_frames=1, isolate=False)
+    table = compare_methods(cfg, progress=False)
+    row = table.iloc[0]
+    assert row["status"] in ("time_budget", "completed"), row["status"]
+    assert row["train_seconds"] > 0 and row["steps"] >= 1
+    assert np.isfinite(row["psnr"]) and 0 < row["ssim"] <= 1
+    written = pd.read_csv(tmp_path / "a" / "compare.csv")
+    assert list(written["method"]) == ["k-planes"]
+    assert (tmp_path / "a" / "k-planes" / "train_log.csv").is_file()
+    fractions = json.loads((tmp_path / "a" / "k-planes" / "time_fractions.json").read_text())
+    assert len(fractions) == row["steps"] and fractions == sorted(fractions)
+    rc = compare_main(["--data", str(tiny_dataset.root), "--out", str(tmp_path / "b"), "--methods", "k-planes",
+                       "--max-steps", "40", "--eval-frames", "1", "--replay", str(tmp_path / "a"), "--in-process",
+                       *[x for o in extra for x in ("--set", o)]])
+    assert rc == 0
+    assert "k-planes" in capsys.readouterr().out
+    again = json.loads((tmp_path / "b" / "compare.json").read_text())["methods"][0]
+    assert again["steps"] == row["steps"]
+    first = pd.read_csv(tmp_path / "a" / "k-planes" / "train_log.csv")
+    second = pd.read_csv(tmp_path / "b" / "k-planes" / "train_log.csv")
+    assert np.array_equal(first["loss"].to_numpy(), second["loss"].to_numpy())
+    assert again["psnr"] == row["psnr"]
+
+
+def test_replay_needs_a_recorded_schedule(tiny_dataset, tmp_path, capsys):
+    rc = compare_main(["--data", str(tiny_dataset.root), "--out", str(tmp_path / "b"), "--methods", "k-planes",
+                       "--replay", str(tmp_path / "nothing"), "--in-process"])
+    assert rc == 2
+    assert "time_fractions.json" in capsys.readouterr().err
+
+
+def test_compare_refuses_unknown_dataset(tmp_path, capsys):
+    assert compare_main(["--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    assert "error:" in capsys.readouterr().err
