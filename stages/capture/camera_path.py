@@ -7,22 +7,9 @@ import zlib
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from stages.scene import look_at
+
 from .spec import CameraPathSpec, CaptureSpec
-
-WORLD_UP = np.array([0.0, 0.0, 1.0])
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = WORLD_UP) -> np.ndarray:
-    """OpenGL camera-to-world matrix at ``eye`` looking at ``target`` (camera -z towards the target)."""
-    back = np.asarray(eye, float) - np.asarray(target, float)
-    back /= np.linalg.norm(back)
-    right = np.cross(up, back)
-    if np.linalg.norm(right) < 1e-9:  # looking straight up or down: any right vector will do
-        right = np.array([1.0, 0.0, 0.0])
-    right /= np.linalg.norm(right)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, np.cross(back, right), back, eye
-    return m
 
 
 def seeded_rng(seed: int, label: str) -> np.random.Generator:

@@ -13,13 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import open3d as o3d
-import yaml
 
-from stages.scene import Camera, InputError, generate_rays
+from stages.scene import Camera, InputError, generate_rays, read_yaml_mapping
 from stages.scene.transforms import camera_from_dict
 
 from .geometry import FACE_AXES, FACE_UV_AXES, SceneModel, build_scene
-from .spec import CaptureSpec, spec_from_dict
+from .spec import CaptureSpec, CaptureSpecError, spec_from_dict
 from .textures import sample_atlas, texture_atlas
 
 SHADOW_EPS = 1e-3  # metres; lifts shadow-ray origins off the surface to avoid self-hits
@@ -189,7 +188,7 @@ class TruthRenderer(SceneRenderer):
         spec_path = capture_dir / "truth" / "spec.yaml"
         if not spec_path.is_file():
             raise InputError(spec_path, "truth spec not found", "point to a folder written by `livescene capture`")
-        spec = spec_from_dict(yaml.safe_load(spec_path.read_text()), spec_path)
+        spec = spec_from_dict(read_yaml_mapping(spec_path, "the capture spec", error=CaptureSpecError), spec_path)
         tpath = capture_dir / "truth" / "transforms.json"
         camera = None
         if tpath.is_file():

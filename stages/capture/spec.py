@@ -17,9 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from stages.scene import InputError
+from stages.scene import InputError, read_yaml_mapping
 
 OBJECT_KINDS = ("door", "drawer", "lid")
 HINGES = {"door": ("left", "right", "top", "bottom"), "lid": ("back",), "drawer": ("front",)}
@@ -281,14 +279,10 @@ def spec_from_dict(data: dict[str, Any], path: str | Path = "<spec>") -> Capture
 def load_spec(path: str | Path) -> CaptureSpec:
     """Read a spec YAML file; errors name the file, the key and the fix."""
     path = Path(path)
-    if not path.is_file():
-        raise CaptureSpecError(path, "spec file not found", "pass a YAML file such as config/captures/demo.yaml")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise CaptureSpecError(path, f"not valid YAML ({exc})", "repair the file") from exc
-    if not isinstance(data, dict):
-        raise CaptureSpecError(path, "top level is not a mapping", "write name:, room:, objects:, camera:, ...")
+    data = read_yaml_mapping(path, "a capture spec (name:, room:, objects:, camera:, video: ...; see "
+                             "config/captures/demo.yaml)", error=CaptureSpecError)
+    if not data:
+        raise CaptureSpecError(path, "spec is empty", "write name:, room:, objects:, camera:, ...")
     data.setdefault("name", path.stem)
     return spec_from_dict(data, path)
 
