@@ -421,5 +421,6 @@ def bad_workflow_config_wrong_type(ctx: CaseContext) -> Outcome:
     require(after == before, "a refused snakemake run changed files outside .snakemake/")
     require("bad-config.yaml" in said, "the error does not name the config file (bad-config.yaml): "
                                        f"{said.strip().splitlines()[:2]}")
-    first = next((s for s in said.splitlines() if "seed" in s or "rror" in s), said.strip()[:100])
+    lines = said.splitlines()
+    first = next((s for s in lines if "seed" in s), next((s for s in lines if "rror" in s), said.strip()[:100]))
     return Outcome(short(first.strip()))

@@ -23,8 +23,10 @@ TINY_MODEL = [
     "model.probability.hidden=8", "model.sampling.num_proposal_samples=[12]", "model.sampling.num_samples=6",
     "train.batch_rays=64", "train.warmup_steps=2", "train.eval_every=0", "train.eval_rays=256",
     "train.checkpoint_every=0", "train.render_chunk=512", "train.threads=0",
+    # no wall-clock budget: with one, the LR decay follows elapsed time and no two runs are bit-identical
+    "train.max_seconds=0",
 ]
-"""Overrides of the cpu-demo preset that make a step take milliseconds on one core."""
+"""Overrides of the cpu-demo preset that make a step take milliseconds on one core, reproducibly."""
 
 
 @dataclass

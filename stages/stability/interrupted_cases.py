@@ -47,14 +47,14 @@ def _straight_weights(ctx: CaseContext, data: Path) -> dict[str, torch.Tensor]:
             torch.set_num_threads(threads)
         return torch.load(out / "model.pt", weights_only=True)["state_dict"]
 
-    return ctx.cached("interrupt-straight", build)
+    return build()
 
 
-def _kill_midway(data: Path, out: Path, sig: int, after_step: int) -> tuple[int, str]:
+def _kill_midway(data: Path, out: Path, sig: int, after_step: int, resume: bool = False) -> tuple[int, str]:
     """Start `livescene train`, send ``sig`` once the checkpoint of ``after_step`` exists; returns (rc, stderr)."""
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    proc = subprocess.Popen(_train_command(data, out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+    proc = subprocess.Popen(_train_command(data, out, resume), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
     target = out / "checkpoints" / f"step_{after_step:06d}.pt"
     deadline = time.monotonic() + 120
     while not target.exists() and proc.poll() is None and time.monotonic() < deadline:
@@ -92,43 +92,32 @@ def _published_files_complete(out: Path) -> list[str]:
     return sorted(p.name for p in out.rglob(".*") if p.is_file())
 
 
-@case("sigterm_resume_bit_exact", "interrupted",
-      "`livescene train` receiving SIGTERM midway saves a checkpoint and exits 143 without model.pt; the same "
-      "command with --resume finishes with weights bit-identical to an uninterrupted run (CPU, same seed)")
-def sigterm_resume_bit_exact(ctx: CaseContext) -> Outcome:
+@case("killed_twice_resume_bit_exact", "interrupted",
+      "`livescene train` receiving SIGTERM midway saves a checkpoint and exits 143 without model.pt; rerun with "
+      "--resume and killed hard (SIGKILL, no handler runs) later, it leaves only complete checkpoints; the third "
+      "run resumes and ends with weights bit-identical to an uninterrupted run (CPU, same seed, no time budget)")
+def killed_twice_resume_bit_exact(ctx: CaseContext) -> Outcome:
     require_module("stages.model", "model, issue 6")
-    data = ctx.cached("interrupt-ds", lambda: hand_built_dataset(ctx.folder("interrupt-ds") / "ds").root)
-    out = ctx.folder("interrupt-term") / "run"
+    data = hand_built_dataset(ctx.folder("interrupt-ds") / "ds").root
+    out = ctx.folder("interrupt-run") / "run"
     rc, err = _kill_midway(data, out, signal.SIGTERM, after_step=5)
     require(rc == 143, f"SIGTERM: exit status {rc}, expected 143; stderr: {err[-300:]}")
     require("resume" in err, f"the SIGTERM message does not say how to resume: {err[-200:]!r}")
     require(not (out / "model.pt").exists(), "an interrupted run wrote model.pt")
-    saved = sorted(int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("step_*.pt"))
-    require(bool(saved) and max(saved) < STEPS, f"checkpoints after SIGTERM: {saved}")
-    _resume(data, out)
-    n = _compare(_straight_weights(ctx, data), out)
-    leftovers = _published_files_complete(out)
-    require(not leftovers, f"temporary files left in the run folder: {leftovers}")
-    return Outcome(f"stopped at step {max(saved)}/{STEPS}, resumed: {n} weights bit-identical to the "
-                   "uninterrupted run", {"stopped_at": max(saved), "steps": STEPS, "weights": n})
-
-
-@case("sigkill_resume_bit_exact", "interrupted",
-      "`livescene train` killed hard (SIGKILL, no handler runs) leaves only complete checkpoints; --resume "
-      "continues from the last one and ends bit-identical to an uninterrupted run")
-def sigkill_resume_bit_exact(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
-    data = ctx.cached("interrupt-ds", lambda: hand_built_dataset(ctx.folder("interrupt-ds") / "ds").root)
-    out = ctx.folder("interrupt-kill") / "run"
-    rc, _ = _kill_midway(data, out, signal.SIGKILL, after_step=10)
+    termed = sorted(int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("step_*.pt"))
+    require(bool(termed) and max(termed) < STEPS, f"checkpoints after SIGTERM: {termed}")
+    rc, _ = _kill_midway(data, out, signal.SIGKILL, after_step=20, resume=True)
     require(rc == -signal.SIGKILL, f"exit status {rc}, expected {-signal.SIGKILL} (killed)")
     require(not (out / "model.pt").exists(), "a killed run has model.pt")
     leftovers = _published_files_complete(out)
-    saved = sorted(int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("step_*.pt"))
+    killed = sorted(int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("step_*.pt"))
     _resume(data, out)
     n = _compare(_straight_weights(ctx, data), out)
-    return Outcome(f"killed after step {max(saved)}/{STEPS}; resumed: {n} weights bit-identical; "
-                   f"{len(leftovers)} temp files left", {"last_checkpoint": max(saved), "temp_files": leftovers})
+    leftovers += [p for p in _published_files_complete(out) if p not in leftovers]
+    return Outcome(f"SIGTERM at step {max(termed)}, SIGKILL after step {max(killed)} of {STEPS}; resumed twice: "
+                   f"{n} weights bit-identical to the uninterrupted run; {len(leftovers)} temp files left",
+                   {"sigterm_checkpoint": max(termed), "sigkill_checkpoint": max(killed), "weights": n,
+                    "temp_files": leftovers})
 
 
 SNAKEFILE = """\
