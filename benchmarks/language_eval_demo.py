@@ -18,7 +18,7 @@ For each capture (nothing here asserts a target; it prints what it measures):
 Timings on the shared 2-core development machine are pessimistic (other engineers' jobs run at the same time).
 
     HF_HUB_OFFLINE=1 .venv/bin/python benchmarks/language_eval_demo.py [--work /tmp/language_eval]
-        [--captures demo,kitchen] [--max-seconds 240] [--max-views 10]
+        [--captures demo,kitchen] [--max-seconds 240] [--max-views 10] [--scale 0.5]
 """
 
 from __future__ import annotations
@@ -88,13 +88,13 @@ def report(name: str, metrics: dict, run_json: dict) -> None:
     print(f"  render fps {fmt(held['fps'], 3)} (CPU, 2 threads, shared machine)")
     if unseen.get("status") == "computed":
         print(f"  unseen combinations: {unseen['n_unseen']} renders ({unseen['n_not_novel']} not novel enough, "
-              f"excluded); poses from {unseen.get('pose_sources')}")
+              f"excluded); truth poses by {unseen.get('truth_pose_source')}")
         print(f"    PSNR image {fmt(unseen['psnr']['mean'])} +- {fmt(unseen['psnr']['std'])} dB, "
               f"moved objects {fmt(unseen['psnr_moved']['mean'])} +- {fmt(unseen['psnr_moved']['std'])} dB")
         if unseen.get("seen_reference"):
             ref = unseen["seen_reference"]
-            print(f"    reference (same views at their own states vs truth renderer): image "
-                  f"{fmt(ref['psnr']['mean'])} dB")
+            print(f"    reference, the same views at their own (seen) states vs the truth renderer: image "
+                  f"{fmt(ref['psnr']['mean'])} dB, object pixels {fmt(ref['psnr_objects']['mean'])} dB")
     else:
         print(f"  unseen combinations: {unseen.get('status')}")
     if ground.get("status") != "computed":
@@ -130,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-seconds", type=float, default=240.0, help="training wall-clock budget per capture")
     p.add_argument("--max-views", type=int, default=10, help="held-out views evaluated per capture")
     p.add_argument("--unseen-views", type=int, default=2)
+    p.add_argument("--scale", type=float, default=0.5, help="evaluate at this fraction of the image size (CPU)")
     p.add_argument("--no-commands", action="store_true")
     args = p.parse_args(argv)
     work = Path(args.work)
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         capture, ds, run = prepare(name, work, args.max_seconds)
         ev = work / name / "evaluate"
         sh([*LIVESCENE, "evaluate", "--run", str(run), "--data", str(ds), "--truth", str(capture), "--out", str(ev),
-            "--max-views", str(args.max_views), "--unseen-views", str(args.unseen_views)], work / name / "eval.log")
+            "--max-views", str(args.max_views), "--unseen-views", str(args.unseen_views), "--scale", str(args.scale)], work / name / "eval.log")
         metrics = json.loads((ev / "metrics.json").read_text())
         run_json = json.loads((run / "run.json").read_text()) if (run / "run.json").is_file() else {}
         report(name, metrics, run_json)

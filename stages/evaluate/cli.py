@@ -104,7 +104,7 @@ def headline(metrics: dict) -> dict:
            "fps": held["fps"], "views": held["psnr"]["n"]}
     if unseen.get("status") == "computed":
         out |= {"unseen_psnr": unseen["psnr"]["mean"], "unseen_psnr_moved": unseen["psnr_moved"]["mean"],
-                "unseen_n": unseen["n_unseen"]}
+                "unseen_n": unseen["n_unseen"], "seen_reference_psnr": unseen["seen_reference"]["psnr"]["mean"]}
     else:
         out["unseen"] = unseen.get("status")
     if ground.get("status") == "computed":

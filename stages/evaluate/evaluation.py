@@ -164,7 +164,7 @@ class Evaluator:
         train_states = self.ds.state_matrix(self.ds.frames_in("train"))
         combos = unseen_combinations(len(objects), train_states, cfg.levels, cfg.novelty_min)
         views = _evenly(self.ds.frames_in("test"), cfg.unseen_views)
-        records = []
+        records, seen = [], []
         saved = 0
         pose_sources = set()
         for frame in tqdm(views, desc="unseen combinations", unit="view"):
@@ -173,7 +173,17 @@ class Evaluator:
             t_c2w, how = self.truth.pose_for(frame)
             pose_sources.add(how)
             own_state = self.truth.state_for(frame) or {}
-            own_ids = self.truth.renderer.render(t_c2w, own_state, camera=tcam)["ids"] if own_state else None
+            own_ids = None
+            if own_state:
+                # the same view at its own (seen) state: the reference the unseen scores are read against
+                own = self.truth.renderer.render(t_c2w, own_state, camera=tcam)
+                own_ids = own["ids"]
+                seen_rgb = np.asarray(self._render(frame, own_state)["rgb"], dtype=np.float64)
+                obj_region = np.isin(own_ids, list(self.truth.object_ids.values()))
+                seen.append({"frame": frame.frame_id,
+                             "psnr": _finite_or_none(psnr(seen_rgb, np.asarray(own["rgb"], np.float64))),
+                             "psnr_objects": _finite_or_none(psnr(seen_rgb, np.asarray(own["rgb"], np.float64),
+                                                                  obj_region))})
             for ci, combo in enumerate(combos):
                 states = dict(zip(objects, combo.values, strict=True))
                 model_rgb = np.asarray(self._render(frame, states)["rgb"], dtype=np.float64)
@@ -212,6 +222,8 @@ class Evaluator:
             "ssim": summarize([r["ssim"] for r in unseen]),
             "n_unseen": len(unseen),
             "n_not_novel": len(records) - len(unseen),
+            "seen_reference": {"views": seen, "psnr": summarize([r["psnr"] for r in seen]),
+                               "psnr_objects": summarize([r["psnr_objects"] for r in seen])},
         }
 
     # -- 3. grounding ---------------------------------------------------------------------------------------
@@ -232,7 +244,7 @@ class Evaluator:
         if rendered and "language" in rendered[0][1]:
             run_space = getattr(self.run, "language_encoder", None)
             if run_space in (None, self.grounder.encoder.name):
-                sources.append("language")
+                sources += ["language", "language_objects"]
                 language_note = "computed"
             else:  # queries must live in the embedding space the table was trained in
                 language_note = (f"skipped: run trained with encoder {run_space!r}, "
@@ -249,8 +261,12 @@ class Evaluator:
                     truth = masks[..., q["index"]]
                     if not truth.any():
                         continue  # the object is not in view: IoU is undefined there
-                    rel = (self.grounder.relevancy_from_probs(out["probs"], q["query"]) if source == "probs"
-                           else self.grounder.relevancy_from_language(out["language"], q["query"]))
+                    if source == "probs":
+                        rel = self.grounder.relevancy_from_probs(out["probs"], q["query"])
+                    elif source == "language":
+                        rel = self.grounder.relevancy_from_language(out["language"], q["query"])
+                    else:
+                        rel = self.grounder.relevancy_from_language_objects(out["language"], q["query"])
                     ious.append(iou(rel > self.config.grounding_threshold, truth))
                     if out_dir is not None and self.config.save_renders and len(ious) == 1:
                         slug = q["query"].replace(" ", "-")

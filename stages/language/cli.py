@@ -57,8 +57,9 @@ def build_parser(prog: str = "livescene language") -> argparse.ArgumentParser:
     r.add_argument("--run", required=True, help="trained run folder")
     r.add_argument("--data", default=None, help="scene dataset (default: the one in the run's config.yaml)")
     r.add_argument("--frame", default=None, help="frame id whose pose to render (default: first test frame)")
-    r.add_argument("--source", default="probs", choices=["probs", "language"],
-                   help="evidence: rendered per-object probabilities or rendered language embedding")
+    r.add_argument("--source", default="probs", choices=["probs", "language", "language_objects"],
+                   help="evidence: rendered per-object probabilities, rendered language embedding (LERF relevancy), "
+                        "or the embedding decoded into objects by the table's phrases")
     r.add_argument("--out", required=True, help="output PNG (relevancy as grey levels)")
     r.add_argument("--device", default="cpu")
     r.add_argument("query")
@@ -137,11 +138,12 @@ def _relevancy(args: argparse.Namespace) -> int:
     grounder = Grounder(ObjectVocabulary.from_prompts(ds.objects, ds.prompts, Path(data) / "prompts.yaml"),
                         encoder_from_args(args))
     out = run.render(ds.camera_of(frame), frame.c2w, frame.state, frame_index=ds.frames.index(frame))
-    if args.source == "language":
+    if args.source in ("language", "language_objects"):
         if "language" not in out:
             raise InputError(args.run, "this run renders no language embedding",
                              "use --source probs, or train with language targets")
-        rel = grounder.relevancy_from_language(out["language"], args.query)
+        rel = (grounder.relevancy_from_language(out["language"], args.query) if args.source == "language"
+               else grounder.relevancy_from_language_objects(out["language"], args.query))
     else:
         rel = grounder.relevancy_from_probs(out["probs"], args.query)
     with atomic_path(args.out, suffix=".png") as tmp:

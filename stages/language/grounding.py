@@ -10,7 +10,14 @@ Two sources of evidence, after METHOD.md section 7:
   reference, and otherwise it spreads over the plausible objects.
 - ``language`` (runs trained with language targets): LERF relevancy of the
   rendered embedding of each pixel against the query, with the canonical
-  negatives "object", "things", "stuff", "texture" and temperature 10.
+  negatives "object", "things", "stuff", "texture" and temperature 10. This is
+  the open-vocabulary map; with a text-only table it also lights up objects
+  whose phrases are merely related ("drawer" vs "cabinet").
+- ``language_objects`` (same runs): the rendered embedding is decoded into
+  per-object probabilities against the table's own phrases (each object's
+  state phrases and the background phrase, softmax with temperature 10), then
+  weighted by the query's object weights as for ``probs``. The closed-set map,
+  like the reference's softmax over the table entries.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import numpy as np
 
 from .encoder import TextEncoder
 from .relevancy import CANONICAL_NEGATIVES, TEMPERATURE, lerf_relevancy, object_similarities, softmax
+from .targets import BACKGROUND_PHRASE
 from .vocabulary import ObjectVocabulary, normalize_phrase
 
 DEFAULT_THRESHOLD = 0.5
@@ -33,6 +41,18 @@ class Grounder:
         self.temperature = temperature
         self._object_vectors = [encoder.encode(self.object_phrases(i)) for i in range(len(vocabulary.entries))]
         self._negatives = encoder.encode(list(CANONICAL_NEGATIVES))
+        self._table_vectors: list[np.ndarray] | None = None
+
+    def table_vectors(self) -> list[np.ndarray]:
+        """Per object ``[2, D]`` embeddings of its closed and open state phrases, then ``[1, D]`` the background's.
+
+        The same phrases ``build_targets`` embeds at the default levels 0 and 1, so a rendered embedding of the
+        table lies between an object's two rows.
+        """
+        if self._table_vectors is None:
+            rows = [self.encoder.encode([e.state_phrase(0.0), e.state_phrase(1.0)]) for e in self.vocabulary.entries]
+            self._table_vectors = [*rows, self.encoder.encode([BACKGROUND_PHRASE])]
+        return self._table_vectors
 
     def object_phrases(self, index: int) -> list[str]:
         e = self.vocabulary.entries[index]
@@ -59,3 +79,14 @@ class Grounder:
         lang = lang / np.maximum(np.linalg.norm(lang, axis=-1, keepdims=True), 1e-12)
         q = self.encoder.encode([query])[0]
         return lerf_relevancy(lang, q, self._negatives, self.temperature)
+
+    def probs_from_language(self, language: np.ndarray) -> np.ndarray:
+        """``[H, W, alpha + 1]`` per-object probabilities decoded from rendered embeddings ``[H, W, D]``."""
+        lang = np.asarray(language, dtype=np.float64)
+        lang = lang / np.maximum(np.linalg.norm(lang, axis=-1, keepdims=True), 1e-12)
+        sims = np.stack([(lang @ v.T).max(-1) for v in self.table_vectors()], axis=-1)
+        return softmax(sims, self.temperature)
+
+    def relevancy_from_language_objects(self, language: np.ndarray, query: str) -> np.ndarray:
+        """``[H, W]`` map: the query's object weights applied to the probabilities decoded from the embedding."""
+        return self.relevancy_from_probs(self.probs_from_language(language), query)

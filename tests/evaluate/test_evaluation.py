@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import ERROR, BagOfWordsEncoder
+from evaluate_fakes import ERROR, BagOfWordsEncoder
 
 from stages.evaluate import EvaluateConfig, TruthSource, evaluate_run, read_sim3
 from stages.evaluate import cli as evaluate_cli
@@ -158,9 +158,11 @@ def test_grounding_from_rendered_language_only_in_the_same_space(eval_scene, tmp
     same = _LanguageRun(run, grounder.encoder, grounder.encoder.name)
     metrics = evaluate_run(same, ds, tmp_path / "a", None, grounder, EvaluateConfig(save_renders=False))
     ground = metrics["grounding"]
-    assert ground["sources"] == ["probs", "language"]
+    assert ground["sources"] == ["probs", "language", "language_objects"]
     q = {q["query"]: q for q in ground["queries"]}
     assert q["fridge"]["language"]["iou"]["mean"] == pytest.approx(1.0)  # pixels carrying "fridge" exactly
+    # decoded against the table phrases ("closed fridge", "open fridge", "background"): the fridge's pixels again
+    assert q["refrigerator"]["language_objects"]["iou"]["mean"] == pytest.approx(1.0)
     assert 0.0 <= ground["miou_language"] <= 1.0
 
     other = _LanguageRun(run, grounder.encoder, "some other model")

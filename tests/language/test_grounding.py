@@ -35,3 +35,18 @@ def test_language_relevancy_prefers_pixels_that_carry_the_query(kitchen, encoder
     rel = grounder.relevancy_from_language(lang, "fridge")
     assert rel.shape == (2, 2, 3)
     assert rel[0].min() > 0.5 > rel[1].max()
+
+
+def test_language_decoded_into_objects_separates_related_objects(kitchen, encoder):
+    """A half-open drawer's embedding is LERF-relevant to "cabinet" words, but decodes to the drawer alone."""
+    grounder = Grounder(kitchen, encoder)
+    closed, opened, background = encoder.encode(["closed drawer", "open drawer", "background"])
+    drawer = (closed + opened) / 2
+    lang = np.stack([np.tile(drawer, (2, 3, 1)), np.tile(background, (2, 3, 1))])
+    probs = grounder.probs_from_language(lang)
+    assert probs.shape == (2, 2, 3, len(kitchen.entries) + 1)
+    np.testing.assert_allclose(probs.sum(-1), 1.0)
+    assert (probs[0].argmax(-1) == 3).all() and (probs[1].argmax(-1) == len(kitchen.entries)).all()
+    rel = grounder.relevancy_from_language_objects(lang, "kitchen drawer")
+    assert rel[0].min() > 0.5 > rel[1].max()
+    assert grounder.relevancy_from_language_objects(lang, "refrigerator").max() < 0.5

@@ -1,0 +1,118 @@
+"""A tiny scene whose images are the renders of a fake truth renderer, a fake run and a fake text encoder.
+
+Everything has a known answer: the fake run returns the truth plus +-0.1 on
+the fridge's pixels only, so every PSNR below is computable by hand.
+"""
+
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from stages.language import CachedEncoder
+from stages.scene import Camera, Frame, SceneDataset, label_map_to_onehot, write_mask, write_scene
+
+W, H = 16, 12
+OBJECTS = ["fridge", "drawer"]
+FRIDGE_COLS = slice(0, 6)
+DRAWER_COLS = slice(10, 16)
+ERROR = 0.1
+
+
+def ids_map() -> np.ndarray:
+    ids = np.zeros((H, W), dtype=np.int32)
+    ids[:, FRIDGE_COLS] = 1
+    ids[:, DRAWER_COLS] = 2
+    return ids
+
+
+class FakeTruthRenderer:
+    """Flat colours: each object's grey level encodes its state; background mid grey."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def render(self, c2w, states, camera=None):
+        self.calls += 1
+        if not isinstance(states, dict):
+            states = dict(zip(OBJECTS, states, strict=True))
+        rgb = np.full((H, W, 3), 0.5, dtype=np.float32)
+        rgb[:, FRIDGE_COLS] = 0.2 + 0.5 * states.get("fridge", 0.0)
+        rgb[:, DRAWER_COLS] = 0.25 + 0.5 * states.get("drawer", 0.0)
+        return {"rgb": rgb, "depth": np.ones((H, W), np.float32), "ids": ids_map()}
+
+
+def _checker() -> np.ndarray:
+    """+-ERROR on the fridge's pixels (sign alternating), 0 elsewhere: MSE there is exactly ERROR**2."""
+    sign = np.where((np.add.outer(np.arange(H), np.arange(W)) % 2) == 0, 1.0, -1.0)
+    out = np.zeros((H, W, 3))
+    out[:, FRIDGE_COLS] = ERROR * sign[:, FRIDGE_COLS, None]
+    return out
+
+
+class FakeRun:
+    """The model API: ``objects`` and ``render(camera, c2w, states, frame_index)``."""
+
+    def __init__(self, dataset: SceneDataset, truth: FakeTruthRenderer) -> None:
+        self.objects = list(dataset.objects)
+        self.ds = dataset
+        self.truth = truth
+        self.rendered: list[tuple[int | None, dict | None]] = []
+
+    def render(self, camera, c2w, states, frame_index=None):
+        self.rendered.append((frame_index, states))
+        frame = self.ds.frames[frame_index]
+        if states == frame.state:  # the held-out view at its own state: the stored (PNG) image
+            base = self.ds.load_image(frame).astype(np.float64)
+        else:
+            base = self.truth.render(c2w, states)["rgb"].astype(np.float64)
+        probs = label_map_to_onehot(np.array([[0, -1, 1][i] for i in ids_map().ravel()]).reshape(H, W), 2)
+        return {"rgb": base + _checker(), "depth": np.ones((H, W)), "accumulation": np.ones((H, W)),
+                "probs": probs.astype(np.float32)}
+
+
+class BagOfWordsEncoder(CachedEncoder):
+    """A deterministic stand-in for a text model: the sum of one random vector per word."""
+
+    name = "bag-of-words-test"
+
+    @property
+    def dim(self) -> int:
+        return 64
+
+    def _encode_new(self, texts):
+        rows = []
+        for t in texts:
+            v = np.zeros(64)
+            for w in t.lower().split():
+                v += np.random.default_rng(zlib.crc32(w.encode())).standard_normal(64)
+            rows.append(v)
+        return np.array(rows)
+
+
+def make_eval_dataset(root: Path, n_frames: int = 8) -> SceneDataset:
+    """Frames on the state diagonal (fridge = drawer), images = fake truth renders saved as PNG."""
+    truth = FakeTruthRenderer()
+    camera = Camera(fx=20.0, fy=20.0, cx=W / 2, cy=H / 2, width=W, height=H)
+    (root / "images").mkdir(parents=True, exist_ok=True)
+    frames = []
+    labels = np.array([[0, -1, 1][i] for i in ids_map().ravel()]).reshape(H, W)
+    for i in range(n_frames):
+        t = i / (n_frames - 1)
+        state = {"fridge": t, "drawer": t}
+        c2w = np.eye(4)
+        c2w[:3, 3] = [0.1 * i, 0.0, 3.0]
+        rgb = truth.render(c2w, state)["rgb"]
+        path = f"images/frame_{i:05d}.png"
+        cv2.imwrite(str(root / path), np.round(rgb[..., ::-1] * 255).astype(np.uint8))
+        write_mask(root, f"{i:05d}", label_map_to_onehot(labels, 2))
+        frames.append(Frame(file_path=path, c2w=c2w, state=state, split="test" if i % 2 == 0 else "train",
+                            source_index=i))
+    ds = SceneDataset(root=root, camera=camera, frames=frames, objects=OBJECTS, object_ids=[1, 2],
+                      prompts={"fridge": {"synonyms": ["refrigerator"]}, "drawer": {"synonyms": ["kitchen drawer"]}},
+                      meta={"units": "m"})
+    write_scene(ds, root)
+    return ds
