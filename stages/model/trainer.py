@@ -4,7 +4,7 @@ Every method of the registry trains here. A run folder holds::
 
     config.yaml              the full RunConfig (written first)
     checkpoints/step_*.pt    model, optimiser, scheduler, every RNG state, wall time so far
-    train_log.csv            wall_s, step, lr, loss, each term, eval_psnr (periodic), rays_per_s
+    train_log.csv            wall_s, step, lr, loss, each term, eval_psnr and eval_miou (periodic), rays_per_s
     model.pt                 final weights + what load_run needs (written last)
     run.json                 method, parameters, peak memory, train seconds, steps, device, objects, normalisation
 
@@ -39,7 +39,7 @@ from .scene_normalization import SceneNormalization
 
 MODEL_FORMAT = 1
 LOSS_COLUMNS = [f.name for f in dataclasses.fields(LossWeights) if f.name != "repulsion_margin"]
-LOG_COLUMNS = ["wall_s", "step", "lr", "loss", *LOSS_COLUMNS, "eval_psnr", "rays_per_s"]
+LOG_COLUMNS = ["wall_s", "step", "lr", "loss", *LOSS_COLUMNS, "eval_psnr", "eval_miou", "rays_per_s"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -185,6 +185,7 @@ class Trainer:
         self.wall_before = 0.0
         self.nonfinite_streak = 0
         self.log_rows: list[dict[str, Any]] = []
+        self.last_eval_miou: float | None = None
 
     # -- checkpoints ----------------------------------------------------------------------------------------
     def checkpoint_path(self, step: int) -> Path:
@@ -299,17 +300,28 @@ class Trainer:
 
     @torch.no_grad()
     def evaluate(self) -> float:
-        """PSNR of the fixed held-out rays."""
+        """PSNR of the fixed held-out rays (also sets ``last_eval_miou``, the mask IoU of those rays)."""
         self.model.eval()
         chunk = self.config.train.render_chunk
         err, n = 0.0, 0
+        alpha = self.info.n_objects
+        inter = torch.zeros(alpha)
+        union = torch.zeros(alpha)
         for i in range(0, len(self.eval_index), chunk):
             batch = self.eval_rays.batch(self.eval_index[i : i + chunk])
             with self._autocast():
                 out = self.model(batch.rays, step=self.step)
             err += float((out["rgb"].float().clamp(0, 1) - batch.rgb).square().sum())
             n += batch.rgb.numel()
+            if alpha and "logits" in out:
+                valid = batch.labels >= 0
+                pred, gt = out["logits"].argmax(-1)[valid].cpu(), batch.labels[valid].cpu()
+                for c in range(alpha):
+                    inter[c] += float(((pred == c) & (gt == c)).sum())
+                    union[c] += float(((pred == c) | (gt == c)).sum())
         self.model.train()
+        seen = union > 0
+        self.last_eval_miou = float((inter[seen] / union[seen]).mean()) if bool(seen.any()) else None
         return psnr_of(err / max(n, 1))
 
     # -- the loop -------------------------------------------------------------------------------------------
@@ -372,6 +384,7 @@ class Trainer:
                 if result is not None:
                     row = {"wall_s": round(self.wall_before + time.perf_counter() - t0, 3), "step": self.step,
                            "lr": self.scheduler.get_last_lr()[0], "eval_psnr": eval_psnr,
+                           "eval_miou": self.last_eval_miou if eval_psnr is not None else None,
                            "rays_per_s": round(rays_per_s, 1), **result}
                     self.log_rows.append(row)
                     if eval_psnr is not None:  # the log on disk follows the run, for plots of error vs time
@@ -395,6 +408,7 @@ class Trainer:
         if status != "completed" and self.log_rows and cfg.train.eval_every > 0:
             last_psnr = self.evaluate()
             self.log_rows[-1]["eval_psnr"] = last_psnr
+            self.log_rows[-1]["eval_miou"] = self.last_eval_miou
         self.save_checkpoint(wall)
         self._write_log()
         if status == "sigterm":
@@ -445,6 +459,7 @@ class Trainer:
             "language": bool(self.language),
             "normalization": self.norm.to_dict(),
             "eval_psnr": eval_psnr,
+            "eval_miou": self.last_eval_miou,
             "data": str(cfg.data),
             "seed": cfg.seed,
             "rays_per_step": cfg.train.batch_rays,

@@ -15,7 +15,7 @@ TINY = [
     "model.proposal.resolutions=[[8,4]]", "model.proposal.hidden=8", "model.probability.resolution=8",
     "model.probability.hidden=8", "model.sampling.num_proposal_samples=[12]", "model.sampling.num_samples=6",
     "train.batch_rays=64", "train.warmup_steps=2", "train.eval_every=2", "train.eval_rays=64",
-    "train.checkpoint_every=100", "train.render_chunk=256", "train.threads=1",
+    "train.checkpoint_every=100", "train.render_chunk=256", "train.threads=1", "train.max_seconds=0",
 ]
 
 
