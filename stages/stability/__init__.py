@@ -6,7 +6,7 @@
 
 from .case_context import CaseContext
 from .case_registry import CASES, Case, CaseFailed, CaseResult, CaseSkipped, Outcome, require, run_case
-from .suite import format_table, run_suite, select
+from .suite import format_markdown, format_table, run_suite, select
 
 __all__ = [
     "CASES",
@@ -16,6 +16,7 @@ __all__ = [
     "CaseResult",
     "CaseSkipped",
     "Outcome",
+    "format_markdown",
     "format_table",
     "require",
     "run_case",

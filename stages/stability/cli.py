@@ -14,7 +14,7 @@ from pathlib import Path
 from stages.scene import write_json
 
 from .case_registry import CASES, GROUPS
-from .suite import format_table, run_suite, select
+from .suite import format_markdown, format_table, run_suite, select
 
 
 def build_parser(prog: str = "livescene stability") -> argparse.ArgumentParser:
@@ -24,6 +24,7 @@ def build_parser(prog: str = "livescene stability") -> argparse.ArgumentParser:
     p.add_argument("--case", action="append", default=[], metavar="NAME", help="run only this case (repeatable)")
     p.add_argument("--group", action="append", default=[], choices=GROUPS, help="run only this group (repeatable)")
     p.add_argument("--list", action="store_true", help="list the cases and what each checks, then exit")
+    p.add_argument("--markdown", action="store_true", help="print the table as Markdown (for docs and reports)")
     p.add_argument("--workdir", type=Path, help="keep the scratch files here (default: a temporary folder)")
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1)")
     return p
@@ -45,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {row.name}: {row.result} ({row.seconds:.1f} s)", file=sys.stderr, flush=True)
 
     summary = run_suite(cases, quick=args.quick, workdir=args.workdir, threads=args.threads, on_result=progress)
-    print(format_table(summary["cases"]))
+    print(format_markdown(summary["cases"]) if args.markdown else format_table(summary["cases"]))
     c = summary["counts"]
     print(f"\n{c['pass']} passed, {c['fail']} failed, {c['error']} errors, {c['skip']} skipped "
           f"of {len(summary['cases'])} cases in {summary['seconds']} s")

@@ -66,3 +66,12 @@ def format_table(rows: list[dict[str, Any]], width: int = 100) -> str:
             text = text[: width - 3] + "..."
         lines.append(f"{r['name'].ljust(name_w)} | {r['result'].ljust(6)} | {text}")
     return "\n".join(lines)
+
+
+def format_markdown(rows: list[dict[str, Any]]) -> str:
+    """The same table in Markdown (docs/stability.md, the report): case | group | result | metric or reason."""
+    lines = ["| case | group | result | metric (pass) or reason |", "|---|---|---|---|"]
+    for r in rows:
+        text = r["metric"] if r["result"] == "pass" else (r["detail"].splitlines()[-1] if r["detail"] else "-")
+        lines.append(f"| {r['name']} | {r['group']} | {r['result']} | {text.replace('|', '/')} |")
+    return "\n".join(lines)

@@ -18,7 +18,7 @@ KNOWN_GAPS = {
 """Cases that fail because an owning stage lacks the behaviour; each names where it was asked for."""
 
 
-SLOW = {"snakemake_interrupt_reruns_incomplete"}
+SLOW = {"snakemake_interrupt_reruns_incomplete", "killed_twice_resume_bit_exact"}
 """Cases that start several processes (snakemake, the stage CLIs): 20-40 s on the shared 2-core machine."""
 
 
