@@ -1,0 +1,172 @@
+"""Everything a scene page shows, read from the files the stages wrote under results/<scene>/.
+
+Each reader returns None (or an empty container) when its file is absent, so a page can say which
+rule was skipped instead of breaking.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from stages.scene import InputError
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file, or None when absent; a corrupt file is an input error naming it."""
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(path, f"is not readable JSON ({exc})", "re-run the rule that writes it") from exc
+
+
+def read_csv_rows(path: Path) -> list[dict[str, str]]:
+    if not path.is_file():
+        return []
+    with path.open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def read_benchmarks(folder: Path) -> dict[str, dict[str, float]]:
+    """Snakemake benchmark TSVs (s, max_rss, cpu_time, ...) by rule name (file stem)."""
+    out: dict[str, dict[str, float]] = {}
+    if not folder.is_dir():
+        return out
+    for path in sorted(folder.glob("*.tsv")):
+        with path.open(newline="") as handle:
+            rows = list(csv.DictReader(handle, delimiter="\t"))
+        if not rows:
+            continue
+        values: dict[str, float] = {}
+        for key in ("s", "max_rss", "cpu_time", "mean_load"):
+            try:
+                values[key] = float(rows[-1].get(key, "nan"))
+            except ValueError:
+                values[key] = float("nan")
+        out[path.stem] = values
+    return out
+
+
+def train_curve(path: Path) -> tuple[list[float], list[float], list[float], list[float]]:
+    """(wall_s, eval_psnr) where evaluated, and (wall_s, loss) of every logged step, from train_log.csv."""
+    xs, ps, lx, ls = [], [], [], []
+    for row in read_csv_rows(path):
+        try:
+            wall = float(row.get("wall_s", ""))
+        except ValueError:
+            continue
+        if row.get("eval_psnr"):
+            try:
+                xs.append(wall)
+                ps.append(float(row["eval_psnr"]))
+            except ValueError:
+                xs.pop()
+        if row.get("loss"):
+            try:
+                ls.append(float(row["loss"]))
+                lx.append(wall)
+            except ValueError:
+                pass
+    return xs, ps, lx, ls
+
+
+def state_errors_vs_truth(states_csv: Path, truth_csv: Path) -> dict[str, dict[str, float]]:
+    """Per object: MAE / max of the interpolated states against the truth (matched on frame file name)."""
+    pred = {(r["frame"], r["object"]): float(r["value"]) for r in read_csv_rows(states_csv)}
+    truth = {(r["frame"], r["object"]): float(r["value"]) for r in read_csv_rows(truth_csv)}
+    per: dict[str, list[float]] = {}
+    for key, value in pred.items():
+        if key in truth:
+            per.setdefault(key[1], []).append(abs(value - truth[key]))
+    return {obj: {"mae": sum(v) / len(v), "max": max(v), "n": len(v)} for obj, v in per.items() if v}
+
+
+@dataclass
+class MethodData:
+    """One trained method: its run and its evaluation."""
+
+    name: str
+    run: dict | None = None
+    """run.json of the run (None when training did not finish)."""
+    curve: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
+    """train_log.csv as (wall_s, eval_psnr, wall_s, loss)."""
+    metrics: dict | None = None
+    """metrics.json of the evaluation."""
+    eval_dir: Path | None = None
+    sweep: dict | None = None
+    """sweep.json of the state sweep (None when no sweep was rendered)."""
+    sweep_dir: Path | None = None
+    control: dict | None = None
+    """language-command results of the control rule."""
+
+
+@dataclass
+class SceneData:
+    """The measured numbers and images of one scene."""
+
+    scene: str
+    results: Path
+    data: Path | None
+    truth: Path | None
+    plan: dict[str, dict]
+    benchmarks: dict[str, dict[str, float]]
+    capture: dict | None = None
+    frames: dict | None = None
+    poses: dict | None = None
+    pose_error: dict | None = None
+    labels: dict | None = None
+    states: dict | None = None
+    states_vs_truth: dict[str, dict[str, float]] = field(default_factory=dict)
+    dataset_info: dict | None = None
+    methods: list[MethodData] = field(default_factory=list)
+    stability: dict | None = None
+
+
+def collect_scene(scene: str, results: str | Path, *, data: str | Path | None, truth: str | Path | None,
+                  methods: list[str], plan: dict[str, dict], stability: str | Path | None = None) -> SceneData:
+    """Read every file of results/<scene>/ the page uses."""
+    root = Path(results)
+    truth_dir = Path(truth) if truth else None
+    sd = SceneData(scene=scene, results=root, data=Path(data) if data else None, truth=truth_dir, plan=plan,
+                   benchmarks=read_benchmarks(root / "benchmarks"))
+    sd.capture = read_json(root / "capture" / "capture.json")
+    sd.frames = read_json(root / "frames" / "frames.json")
+    sd.poses = read_json(root / "poses" / "poses.json")
+    sd.pose_error = read_json(root / "pose_error.json")
+    sd.labels = read_json(root / "labels" / "labels.json")
+    sd.states = read_json(root / "states" / "states.json")
+    if truth_dir is not None and (root / "states" / "states.csv").is_file():
+        sd.states_vs_truth = state_errors_vs_truth(root / "states" / "states.csv", truth_dir / "truth" / "states.csv")
+    if sd.data is not None and (sd.data / "transforms.json").is_file():
+        transforms = read_json(sd.data / "transforms.json") or {}
+        frames = transforms.get("frames", [])
+        mapping_file = sd.data / "mapping.yaml"
+        import yaml
+
+        mapping = yaml.safe_load(mapping_file.read_text()) if mapping_file.is_file() else {}
+        sd.dataset_info = {"frames": len(frames),
+                           "train": sum(1 for f in frames if f.get("split") == "train"),
+                           "test": sum(1 for f in frames if f.get("split") == "test"),
+                           "width": transforms.get("w"), "height": transforms.get("h"),
+                           "objects": [str(mapping[k]) for k in sorted(mapping)] if mapping else []}
+    for name in methods:
+        m = MethodData(name=name)
+        run_dir = root / "runs" / name
+        m.run = read_json(run_dir / "run.json")
+        m.curve = train_curve(run_dir / "train_log.csv")
+        eval_dir = root / "eval" / name
+        m.metrics = read_json(eval_dir / "metrics.json")
+        m.eval_dir = eval_dir if eval_dir.is_dir() else None
+        sweep_dir = root / "sweep" / name
+        m.sweep = read_json(sweep_dir / "sweep.json")
+        m.sweep_dir = sweep_dir if m.sweep else None
+        m.control = read_json(root / "control" / name / "commands.json")
+        sd.methods.append(m)
+    if stability:
+        sd.stability = read_json(Path(stability))
+    return sd

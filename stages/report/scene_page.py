@@ -1,0 +1,358 @@
+"""The HTML page of one scene: every section the workflow can fill, each saying why when it cannot."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from html import escape
+from pathlib import Path
+from typing import Any
+
+from .html_parts import fmt, missing, page, table
+from .images import error_map, file_data_uri, png_data_uri, read_rgb
+from .scene_data import MethodData, SceneData
+from .svg_plot import Series, bar_chart_svg, line_plot_svg
+
+SECTIONS = [
+    ("rules", "Rules run and skipped"),
+    ("timings", "Stage timings"),
+    ("poses", "Pose quality"),
+    ("states", "Interpolation errors"),
+    ("methods", "Methods"),
+    ("curves", "Error against run time"),
+    ("grid", "Held-out views"),
+    ("sliders", "Object state sliders"),
+    ("relevancy", "Relevancy maps"),
+    ("unseen", "Unseen state combinations"),
+    ("commands", "Language commands"),
+    ("stability", "Stability checks"),
+]
+
+
+def _why_skipped(sd: SceneData, rule: str) -> str:
+    entry = sd.plan.get(rule)
+    if entry is None:
+        return f"rule {rule} is not part of this workflow"
+    if entry.get("needed"):
+        return f"rule {rule} was planned but its output is missing (see results/{sd.scene}/logs/)"
+    return f"rule {rule} skipped for this scene: {entry.get('why', 'not needed')}"
+
+
+def _rule_benchmark(sd: SceneData, rule: str) -> dict | None:
+    """Benchmark of a plan entry such as 'train[conerf]' (file train_conerf.tsv)."""
+    stem = re.sub(r"\[(.*)\]", r"_\1", rule)
+    return sd.benchmarks.get(stem)
+
+
+def section_rules(sd: SceneData) -> str:
+    rows = []
+    for rule, entry in sd.plan.items():
+        bench = _rule_benchmark(sd, rule)
+        if entry.get("needed"):
+            status = '<span class="ok">ran</span>' if bench else "planned (no benchmark yet)"
+            if rule == "stability" and sd.stability:
+                status = '<span class="ok">ran</span>'
+        else:
+            status = '<span class="skip">skipped</span>'
+        rows.append([escape(rule), status, escape(entry.get("why", "")), bench["s"] if bench else None])
+    return table(["rule", "status", "why", "wall s"], rows)
+
+
+def section_timings(sd: SceneData) -> str:
+    if not sd.benchmarks:
+        return missing("No benchmark files in results/<scene>/benchmarks/: no rule of this scene has run yet.")
+    items = sorted(((k, v["s"]) for k, v in sd.benchmarks.items() if math.isfinite(v["s"])), key=lambda kv: -kv[1])
+    total = sum(v for _, v in items)
+    rows = [[escape(k), v["s"], v["cpu_time"], v["max_rss"]] for k, v in
+            sorted(sd.benchmarks.items(), key=lambda kv: -kv[1]["s"])]
+    return (f"<p>Measured by Snakemake's <code>benchmark:</code> directive. Sum of job wall times: "
+            f"<b>{total:.1f} s</b> (jobs may overlap on several cores).</p>"
+            + bar_chart_svg(items) + table(["job", "wall s", "cpu s", "max RSS MiB"], rows))
+
+
+def section_poses(sd: SceneData) -> str:
+    if sd.poses is None:
+        return missing(_why_skipped(sd, "poses"))
+    p = sd.poses
+    rows = [["registered frames", f"{p.get('n_registered')} / {p.get('n_frames')}"],
+            ["registered fraction", fmt(p.get("registered_fraction"))],
+            ["mean reprojection error (px)", fmt(p.get("mean_reprojection_error", p.get("reprojection_error")))],
+            ["3D points", fmt(p.get("n_points3D"))],
+            ["matcher", fmt(p.get("matcher"))],
+            ["COLMAP seconds", fmt((p.get("timings") or {}).get("total"), 1)]]
+    html = table(["COLMAP", "value"], rows)
+    if sd.pose_error is None:
+        html += missing(_why_skipped(sd, "pose_compare"))
+    else:
+        e = sd.pose_error
+        fe = e.get("focal_error") or {}
+        rows = [["frames matched", fmt(e.get("n_matched"))],
+                ["camera-centre error / scene extent (mean, max)",
+                 f"{fmt(100 * e['centre_error_relative']['mean'], 2)} %, "
+                 f"{fmt(100 * e['centre_error_relative']['max'], 2)} %"],
+                ["rotation error deg (mean, max)",
+                 f"{fmt(e['rotation_error_deg']['mean'], 2)}, {fmt(e['rotation_error_deg']['max'], 2)}"],
+                ["focal error (relative fx)", f"{fmt(100 * fe['relative_fx'], 2)} %" if "relative_fx" in fe else "–"],
+                ["alignment scale (truth -> COLMAP)", fmt(e.get("scale"))]]
+        html += "<h3>Against the truth</h3>" + table(["pose error", "value"], rows)
+    return html
+
+
+def section_states(sd: SceneData) -> str:
+    if sd.states is None:
+        return missing(_why_skipped(sd, "states"))
+    loo = sd.states.get("leave_one_out") or {}
+    methods = sd.states.get("methods") or {}
+    rows = []
+    for obj, per in loo.items():
+        for method, v in per.items():
+            chosen = " (used)" if methods.get(obj) == method else ""
+            truth = sd.states_vs_truth.get(obj, {}) if chosen else {}
+            rows.append([escape(obj), escape(method + chosen), v.get("mae"), v.get("max"), v.get("n"),
+                         truth.get("mae"), truth.get("max")])
+    html = ("<p>Leave-one-out: each key frame predicted from the others. Against truth: the dense interpolated "
+            "states of every frame against the capture's dense truth states.</p>")
+    html += table(["object", "interpolation", "leave-one-out MAE", "LOO max", "n", "vs truth MAE", "vs truth max"],
+                  rows)
+    if not sd.states_vs_truth:
+        html += missing("No truth states for this scene: the interpolation is checked by leave-one-out only.")
+    return html
+
+
+def _metric(m: MethodData, *keys: str) -> Any:
+    value: Any = m.metrics
+    for k in keys:
+        if not isinstance(value, dict):
+            return None
+        value = value.get(k)
+    return value
+
+
+def section_methods(sd: SceneData) -> str:
+    rows = []
+    for m in sd.methods:
+        if m.run is None and m.metrics is None:
+            rows.append([escape(m.name)] + [escape(_why_skipped(sd, f"train[{m.name}]"))] + [None] * 9)
+            continue
+        lpips = _metric(m, "held_out", "lpips", "mean")
+        lpips_cell = fmt(lpips) if lpips is not None else escape(
+            str(_metric(m, "held_out", "lpips_status") or "not available"))
+        run = m.run or {}
+        params = (run.get("params") or {}).get("total")
+        grounding = _metric(m, "grounding", "miou_probs")
+        rows.append([escape(m.name), _metric(m, "held_out", "psnr", "mean"), _metric(m, "held_out", "ssim", "mean"),
+                     lpips_cell, _metric(m, "unseen_combinations", "psnr", "mean"),
+                     grounding if isinstance(grounding, (int, float)) else None,
+                     params, run.get("peak_memory_mib"), run.get("train_seconds"), run.get("steps"),
+                     _metric(m, "held_out", "fps")])
+    return ("<p>Held-out views of the test split; unseen combinations and grounding need truth and names. "
+            "Memory is the training process's peak (max RSS on CPU).</p>"
+            + table(["method", "PSNR dB", "SSIM", "LPIPS", "unseen PSNR dB", "grounding mIoU (probs)", "parameters",
+                     "peak memory MiB", "train s", "steps", "render fps"], rows))
+
+
+def section_curves(sd: SceneData) -> str:
+    series = [Series(m.name, m.curve[0], m.curve[1]) for m in sd.methods if m.curve[0]]
+    if not series:
+        return missing("No periodic evaluation in any train_log.csv (training did not run or logged no eval_psnr).")
+    loss = [Series(m.name, m.curve[2], m.curve[3]) for m in sd.methods if m.curve[2]]
+    return ("<p>Periodic held-out PSNR logged during training (higher PSNR = lower error), against wall-clock "
+            "seconds; every method on one plot.</p>"
+            + line_plot_svg(series, x_label="training wall time (s)", y_label="eval PSNR (dB)",
+                            title="held-out error against run time")
+            + line_plot_svg(loss, x_label="training wall time (s)", y_label="training loss",
+                            title="training loss against run time"))
+
+
+def _img(uri: str | None, alt: str, width: int | None = None) -> str:
+    if uri is None:
+        return f'<span class="missing">{escape(alt)}: missing</span>'
+    w = f' width="{width}"' if width else ""
+    return f'<img src="{uri}" alt="{escape(alt)}"{w}>'
+
+
+def section_grid(sd: SceneData, views: int) -> str:
+    evaluated = [m for m in sd.methods if m.metrics and m.eval_dir]
+    if not evaluated or sd.data is None:
+        return missing("No evaluation with renders: " + _why_skipped(sd, f"evaluate[{sd.methods[0].name}]")
+                       if sd.methods else "No methods.")
+    frames = [v["frame"] for v in (_metric(evaluated[0], "held_out", "views") or [])][:views]
+    paths = {v["frame"]: v.get("file_path") for v in (_metric(evaluated[0], "held_out", "views") or [])}
+    if not frames:
+        return missing("The evaluation wrote no held-out views.")
+    head = ["view", "truth"] + [h for m in evaluated for h in (m.name, f"{m.name} error")]
+    rows = []
+    for fid in frames:
+        truth = read_rgb(sd.data / paths[fid]) if paths.get(fid) else None
+        cells = [escape(fid), _img(png_data_uri(truth) if truth is not None else None, f"truth {fid}")]
+        for m in evaluated:
+            render = read_rgb(m.eval_dir / "renders" / f"{fid}.png")
+            psnr = next((v.get("psnr") for v in _metric(m, "held_out", "views") or [] if v["frame"] == fid), None)
+            cells.append(_img(png_data_uri(render) if render is not None else None, f"{m.name} {fid}")
+                         + f"PSNR {fmt(psnr, 2)}")
+            cells.append(_img(png_data_uri(error_map(truth, render)) if truth is not None and render is not None
+                              else None, f"{m.name} error {fid}"))
+        rows.append(cells)
+    return ("<p>Error maps: mean absolute RGB error per pixel, black = 0, yellow = 0.25 or more.</p>"
+            + table(head, rows, cls="grid"))
+
+
+def section_sliders(sd: SceneData) -> tuple[str, dict[str, list[str]]]:
+    """The slider HTML and the image lists the page script swaps between."""
+    blocks, images = [], {}
+    for m in sd.methods:
+        if m.sweep is None or m.sweep_dir is None:
+            continue
+        blocks.append(f"<h3>{escape(m.name)} (view {escape(str(m.sweep.get('frame')))}, other objects at the "
+                      f"view's state)</h3>")
+        for obj, entry in (m.sweep.get("objects") or {}).items():
+            key = f"sweep-{len(images)}"
+            uris = [file_data_uri(m.sweep_dir / f) or "" for f in entry["images"]]
+            images[key] = uris
+            values = entry["values"]
+            blocks.append(
+                f'<div class="slider"><label>{escape(obj)} state: <input type="range" class="sweep" min="0" '
+                f'max="{len(uris) - 1}" step="1" value="0" data-target="{key}" '
+                f'data-values="{escape(json.dumps(values))}" aria-label="{escape(obj)} state"> '
+                f'<output id="{key}-value">{values[0]:.2f}</output></label><br>'
+                f'<img id="{key}" src="{uris[0]}" alt="{escape(m.name)} {escape(obj)} sweep"></div>')
+    if not blocks:
+        first = sd.methods[0].name if sd.methods else "livescene"
+        return missing(_why_skipped(sd, f"sweep[{first}]")), images
+    return "".join(blocks), images
+
+
+SLIDER_SCRIPT = """
+const SWEEPS = %s;
+document.querySelectorAll('input.sweep').forEach(function (el) {
+  el.addEventListener('input', function () {
+    const key = el.dataset.target, i = Number(el.value), values = JSON.parse(el.dataset.values);
+    document.getElementById(key).src = SWEEPS[key][i];
+    document.getElementById(key + '-value').textContent = values[i].toFixed(2);
+  });
+});
+"""
+
+
+def section_relevancy(sd: SceneData) -> str:
+    blocks = []
+    for m in sd.methods:
+        g = _metric(m, "grounding")
+        if not isinstance(g, dict) or g.get("status") != "computed" or m.eval_dir is None:
+            continue
+        figures = []
+        folder = m.eval_dir / "grounding"
+        for q in g.get("queries", []):
+            query = q.get("query", "")
+            qslug = re.sub(r"[^A-Za-z0-9_-]+", "-", query).strip("-")
+            for source in g.get("sources", ["probs"]):
+                files = sorted(folder.glob(f"{source}_{qslug}_*.png"))
+                iou = ((q.get(source) or {}).get("iou") or {}).get("mean")
+                for f in files[:1]:
+                    figures.append(f'<figure>{_img(file_data_uri(f), f"{query} {source}")}'
+                                   f'<figcaption>"{escape(query)}" ({escape(source)})<br>IoU {fmt(iou, 2)}'
+                                   f'</figcaption></figure>')
+        mious = ", ".join(f"mIoU {src} {fmt(g.get(f'miou_{src}'), 3)}" for src in g.get("sources", []))
+        blocks.append(f"<h3>{escape(m.name)}</h3><p>threshold {fmt(g.get('threshold'), 2)}; {mious}</p>"
+                      + "".join(figures))
+    if not blocks:
+        return missing("No grounding results: " + ("the scene has no names (language rules skipped)"
+                                                    if not sd.plan.get("language_targets", {}).get("needed")
+                                                    else "the evaluations computed no grounding"))
+    return "".join(blocks)
+
+
+def section_unseen(sd: SceneData) -> str:
+    rows = []
+    for m in sd.methods:
+        u = _metric(m, "unseen_combinations")
+        if not isinstance(u, dict) or u.get("status") != "computed":
+            continue
+        rows.append([escape(m.name), (u.get("psnr") or {}).get("mean"), (u.get("psnr_moved") or {}).get("mean"),
+                     (u.get("ssim") or {}).get("mean"), sum(1 for c in u.get("combinations", []) if c.get("unseen")),
+                     len(u.get("combinations", []))])
+    if not rows:
+        return missing("No unseen-combination test: it needs the capture truth (no truth for this scene, or the "
+                       "evaluation skipped it).")
+    return ("<p>Held-out poses rendered at state combinations the training never showed, against the truth "
+            "renderer; 'moved' = only the pixels of the objects that moved.</p>"
+            + table(["method", "PSNR dB", "PSNR moved dB", "SSIM", "unseen combinations", "combinations"], rows))
+
+
+def section_commands(sd: SceneData) -> str:
+    blocks = []
+    for m in sd.methods:
+        if not m.control:
+            continue
+        rows = []
+        for c in m.control.get("commands", []):
+            if "error" in c:
+                rows.append([escape(c.get("command", "")), f'<span class="fail">{escape(str(c["error"]))}</span>',
+                             ""])
+                continue
+            states = c.get("states")
+            shown = ", ".join(f"{k} {v:.2f}" for k, v in states.items()) if isinstance(states, dict) else \
+                escape(json.dumps(states))
+            image = file_data_uri(c["image"]) if c.get("image") else None
+            rows.append([escape(c.get("command", "")), escape(shown), _img(image, c.get("command", ""), 160)])
+        blocks.append(f"<h3>{escape(m.name)}</h3>" + table(["command", "resulting states", "render"], rows))
+    if not blocks:
+        first = sd.methods[0].name if sd.methods else "livescene"
+        return missing(_why_skipped(sd, f"control[{first}]"))
+    return "".join(blocks)
+
+
+def section_stability(sd: SceneData) -> str:
+    s = sd.stability
+    if not s:
+        return missing(_why_skipped(sd, "stability"))
+    counts = s.get("counts", {})
+    rows = []
+    for c in s.get("cases", []):
+        result = c.get("result", "")
+        cls = {"pass": "ok", "skip": "skip"}.get(result, "fail")
+        rows.append([escape(c.get("name", "")), escape(c.get("group", "")), f'<span class="{cls}">{escape(result)}'
+                     f"</span>", escape(str(c.get("metric", ""))[:300]), c.get("seconds")])
+    return (f"<p>{', '.join(f'{v} {k}' for k, v in counts.items())} in {fmt(s.get('seconds'), 1)} s"
+            f"{' (quick mode)' if s.get('quick') else ''}.</p>"
+            + table(["case", "group", "result", "metric", "s"], rows))
+
+
+def scene_summary(sd: SceneData) -> dict:
+    """Headline numbers for the index page."""
+    return {"scene": sd.scene, "page": f"scenes/{sd.scene}.html",
+            "objects": (sd.dataset_info or {}).get("objects", []),
+            "frames": (sd.dataset_info or {}).get("frames"),
+            "registered_fraction": (sd.poses or {}).get("registered_fraction"),
+            "methods": {m.name: {"psnr": _metric(m, "held_out", "psnr", "mean"),
+                                 "ssim": _metric(m, "held_out", "ssim", "mean"),
+                                 "train_seconds": (m.run or {}).get("train_seconds")} for m in sd.methods},
+            "skipped": [k for k, v in sd.plan.items() if not v.get("needed")],
+            "job_seconds": round(sum(v["s"] for v in sd.benchmarks.values() if math.isfinite(v["s"])), 1)}
+
+
+def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
+    """The complete HTML page of one scene."""
+    info = sd.dataset_info or {}
+    head = (f"<h1>Scene {escape(sd.scene)}</h1><p><a href=\"../index.html\">all scenes</a> · dataset "
+            f"{escape(str(sd.data))}: {fmt(info.get('frames'))} frames ({fmt(info.get('train'))} train, "
+            f"{fmt(info.get('test'))} test), {fmt(info.get('width'))}x{fmt(info.get('height'))}, objects "
+            f"{escape(', '.join(info.get('objects', [])) or '–')}</p>")
+    nav = "<nav>" + "".join(f'<a href="#{k}">{escape(t)}</a>' for k, t in SECTIONS) + "</nav>"
+    sliders, images = section_sliders(sd)
+    bodies = {"rules": section_rules(sd), "timings": section_timings(sd), "poses": section_poses(sd),
+              "states": section_states(sd), "methods": section_methods(sd), "curves": section_curves(sd),
+              "grid": section_grid(sd, views), "sliders": sliders, "relevancy": section_relevancy(sd),
+              "unseen": section_unseen(sd), "commands": section_commands(sd), "stability": section_stability(sd)}
+    body = head + nav + "".join(f'<section id="{k}"><h2>{escape(t)}</h2>{bodies[k]}</section>' for k, t in SECTIONS)
+    script = SLIDER_SCRIPT % json.dumps(images) if images else ""
+    return page(f"LiveScene report: {sd.scene}", body, script)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    from stages.scene import atomic_path
+
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text)
+        Path(tmp).chmod(0o644)  # mkstemp makes 0600; a report is for reading

@@ -1,0 +1,36 @@
+# Evaluate: held-out metrics and renders of every trained run; with truth also unseen state
+# combinations (and the pose alignment when the poses were estimated); grounding with names.
+
+
+rule evaluate:
+    input:
+        unpack(evaluate_input),
+    output:
+        report(
+            directory(R("{scene}", "eval", "{method}")),
+            patterns=["{name}.png"],
+            caption="../report/evaluate.rst",
+            category="Held-out renders",
+            subcategory="{method}",
+            labels={"scene": "{scene}", "method": "{method}", "view": "{name}"},
+        ),
+    log:
+        R("{scene}", "logs", "evaluate_{method}.log"),
+    benchmark:
+        R("{scene}", "benchmarks", "evaluate_{method}.tsv")
+    params:
+        cli=LIVESCENE,
+        args=evaluate_args,
+        views=config["evaluate"]["max_views"],
+        unseen=config["evaluate"]["unseen_views"],
+        device=config["device"],
+    threads: 2
+    resources:
+        mem_mb=6000,
+        runtime=60,
+        gpu=config["gpus"],
+    conda:
+        ENV
+    shell:
+        "{params.cli} evaluate --run {input.run} --data {input.data} {params.args} --out {output}"
+        " --max-views {params.views} --unseen-views {params.unseen} --device {params.device} > {log} 2>&1"

@@ -1,0 +1,23 @@
+# Frames: extract the frames of a video or image folder (left out when poses come with the data).
+
+
+rule frames:
+    input:
+        frames_input,
+    output:
+        directory(R("{scene}", "frames")),
+    log:
+        log_path("frames"),
+    benchmark:
+        bench_path("frames")
+    params:
+        cli=LIVESCENE,
+        video=frames_video,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=20,
+    conda:
+        ENV
+    shell:
+        "{params.cli} frames --video {params.video} --out {output} --no-progress > {log} 2>&1"

@@ -1,0 +1,57 @@
+# Poses: COLMAP structure from motion on the frames, interactive objects masked out; and, when the
+# scene has truth, the error of the estimated poses against it.
+
+
+rule poses:
+    input:
+        unpack(poses_input),
+    output:
+        directory(R("{scene}", "poses")),
+    log:
+        log_path("poses"),
+    benchmark:
+        bench_path("poses")
+    params:
+        cli=LIVESCENE,
+        masks=poses_masks,
+        seed=config["seed"],
+        matcher=config["poses"]["matcher"],
+        features=config["poses"]["max_features"],
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    conda:
+        ENV
+    shell:
+        "{params.cli} poses --frames {input.frames} --out {output} {params.masks} --threads {threads}"
+        " --seed {params.seed} --matcher {params.matcher} --max-features {params.features} --no-progress"
+        " > {log} 2>&1"
+
+
+rule pose_compare:
+    input:
+        poses=R("{scene}", "poses"),
+        truth=lambda w: truth_dir(w.scene),
+    output:
+        report(
+            R("{scene}", "pose_error.json"),
+            caption="../report/pose_error.rst",
+            category="Poses",
+            labels={"scene": "{scene}", "file": "pose error vs truth"},
+        ),
+    log:
+        log_path("pose_compare"),
+    benchmark:
+        bench_path("pose_compare")
+    params:
+        cli=LIVESCENE,
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        ENV
+    shell:
+        "{params.cli} poses compare --pred {input.poses}/transforms.json --truth {input.truth}/truth/transforms.json"
+        " --out {output} > {log} 2>&1"

@@ -1,0 +1,92 @@
+# Report: state sweeps for the sliders, one self-contained HTML page per scene, and the index.
+
+
+rule sweep:
+    input:
+        unpack(dataset_input),
+        run=R("{scene}", "runs", "{method}"),
+    output:
+        directory(R("{scene}", "sweep", "{method}")),
+    log:
+        R("{scene}", "logs", "sweep_{method}.log"),
+    benchmark:
+        R("{scene}", "benchmarks", "sweep_{method}.tsv")
+    params:
+        cli=LIVESCENE,
+        steps=config["report"]["sweep_steps"],
+        scale=config["report"]["sweep_scale"],
+        device=config["device"],
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=30,
+        gpu=config["gpus"],
+    conda:
+        ENV
+    shell:
+        "{params.cli} report sweep --run {input.run} --data {input.data} --out {output} --steps {params.steps}"
+        " --scale {params.scale} --device {params.device} > {log} 2>&1"
+
+
+rule report_scene:
+    input:
+        unpack(lambda w: scene_outputs(w.scene)),
+    output:
+        page=report(
+            str(Path(REPORTS, "scenes", "{scene}.html")),
+            caption="../report/scene_page.rst",
+            category="HTML report",
+            labels={"page": "{scene}"},
+        ),
+        summary=R("{scene}", "report", "summary.json"),
+    log:
+        log_path("report"),
+    benchmark:
+        bench_path("report")
+    params:
+        cli=LIVESCENE,
+        plan=lambda w: json.dumps({k: {"needed": v[0], "why": v[1]} for k, v in plan(w.scene).items()}),
+        methods=lambda w: ",".join(methods(w.scene)),
+        results=lambda w: R(w.scene),
+        data=lambda w: dataset_dir(w.scene),
+        truth=lambda w: truth_dir(w.scene) if has_truth(w.scene) else "",
+        stability=str(Path(RESULTS, "stability", "summary.json")),
+        views=config["report"]["grid_views"],
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENV
+    shell:
+        "{params.cli} report scene --scene {wildcards.scene} --results {params.results} --data {params.data}"
+        " --truth {params.truth:q} --methods {params.methods} --plan-json {params.plan:q}"
+        " --stability {params.stability} --views {params.views} --out {output.page} --summary {output.summary}"
+        " > {log} 2>&1"
+
+
+rule report_index:
+    input:
+        summaries=expand(R("{scene}", "report", "summary.json"), scene=scenes.index),
+        pages=expand(str(Path(REPORTS, "scenes", "{scene}.html")), scene=scenes.index),
+    output:
+        report(
+            str(Path(REPORTS, "index.html")),
+            caption="../report/index_page.rst",
+            category="HTML report",
+            labels={"page": "index"},
+        ),
+    log:
+        str(Path(RESULTS, "logs", "report_index.log")),
+    benchmark:
+        str(Path(RESULTS, "benchmarks", "report_index.tsv"))
+    params:
+        cli=LIVESCENE,
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        ENV
+    shell:
+        "{params.cli} report index --summaries {input.summaries} --out {output} > {log} 2>&1"

@@ -1,0 +1,46 @@
+# Scene dataset: assemble frames, poses, labels and states into the dataset contract, or check a
+# ready dataset against it.
+
+
+rule assemble:
+    input:
+        unpack(assemble_input),
+    output:
+        directory(R("{scene}", "dataset")),
+    log:
+        log_path("assemble"),
+    benchmark:
+        bench_path("assemble")
+    params:
+        cli=LIVESCENE,
+        args=assemble_args,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENV
+    shell:
+        "{params.cli} scene assemble --frames {input.frames} --poses {input.poses} {params.args} --out {output}"
+        " --no-progress > {log} 2>&1"
+
+
+rule scene_validate:
+    input:
+        lambda w: row(w.scene)["path"],
+    output:
+        R("{scene}", "dataset_valid.json"),
+    log:
+        log_path("scene_validate"),
+    benchmark:
+        bench_path("scene_validate")
+    params:
+        cli=LIVESCENE,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENV
+    shell:
+        "({params.cli} scene validate {input} && {params.cli} scene info {input} > {output}) > {log} 2>&1"
