@@ -90,7 +90,12 @@ class KPlanesEncoding(nn.Module):
         """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
         out: torch.Tensor | None = None
         for plane, (a, b) in zip(self.planes, self.pairs, strict=True):
-            f = sample_plane_cn(plane, coords[:, [a, b]])
+            xy = coords[:, [a, b]]
+            if not self.touches_non_spatial(a, b):
+                # positions never need a gradient; without it grid_sample skips the coordinate gradient, which
+                # coords would otherwise require in learned-state mode (the k column carries the state's gradient)
+                xy = xy.detach()
+            f = sample_plane_cn(plane, xy)
             out = f if out is None else out * f
         assert out is not None
         return out.transpose(0, 1)

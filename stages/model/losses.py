@@ -102,15 +102,24 @@ def focal_mask_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, gamma: 
 
 
 def repulsion_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, margin: float = 10.0) -> torch.Tensor:
-    """Pairs (first half, second half) of a randomly drawn batch; differing labels: ELU(K - L1 dist) + 1."""
+    """``ELU(K - d) + 1`` with ``d`` the mean L1 distance of the rendered logits of ray pairs with different labels.
+
+    Pairs are (first half, second half) of a randomly drawn batch. As in the
+    reference code, ``d`` is ONE mean over all differing pairs, taken over the
+    two logit channels where their one-hot labels differ (each pair's own
+    label channels), and the hinge applies to that mean: the term pushes the
+    classes apart on average instead of forcing every pair past ``K``.
+    """
     half = rendered_logits.shape[0] // 2
     a, b = rendered_logits[:half].float(), rendered_logits[half : 2 * half].float()
     la, lb = labels[:half], labels[half : 2 * half]
     differ = (la != lb) & (la >= 0) & (lb >= 0)
     if not bool(differ.any()):
         return rendered_logits.sum() * 0.0
-    dist = (a[differ] - b[differ]).abs().sum(dim=-1)
-    return (F.elu(margin - dist) + 1.0).mean()
+    a, b, la, lb = a[differ], b[differ], la[differ], lb[differ]
+    rows = torch.arange(a.shape[0], device=a.device)
+    dist = torch.cat([(a[rows, la] - b[rows, la]).abs(), (a[rows, lb] - b[rows, lb]).abs()]).mean()
+    return F.elu(margin - dist) + 1.0
 
 
 def language_loss(rendered: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,

@@ -86,11 +86,14 @@ def test_focal_mask_loss():
 
 def test_repulsion_loss():
     labels = torch.tensor([0, 1, 1, 1])  # pairs (0, 1, differ) and (1, 1, same)
-    far = torch.tensor([[30.0, 0.0], [0.0, 0.0], [0.0, 30.0], [0.0, 0.0]])
+    far = torch.tensor([[30.0, 0.0], [0.0, 0.0], [0.0, 30.0], [0.0, 0.0]])  # differ by 30 in both label channels
     assert L.repulsion_loss(far, labels, margin=10).item() == pytest.approx(0.0, abs=1e-6)
     near = torch.zeros(4, 2)
     assert L.repulsion_loss(near, labels, margin=10).item() == pytest.approx(11.0)  # ELU(10) + 1
     assert L.repulsion_loss(near, torch.tensor([1, 0, 1, 0]), margin=10).item() == 0  # no differing pair
+    # only the pair's own label channels count: a gap of 4 in channels 0 and 1, a huge one in channel 2
+    three = torch.tensor([[4.0, 0.0, 100.0], [0.0, 0.0, 0.0], [0.0, 4.0, 0.0], [0.0, 0.0, 0.0]])
+    assert L.repulsion_loss(three, labels, margin=10).item() == pytest.approx(7.0)  # ELU(10 - 4) + 1
 
 
 def test_language_and_state_losses():
