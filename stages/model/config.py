@@ -222,10 +222,10 @@ class TrainConfig:
     """Wall-clock budget in seconds (0 = none); training stops and saves when it is spent."""
     batch_rays: int = 4096
     """Rays per step (reference 4096)."""
-    lr: float = 0.01
-    """Peak Adam learning rate of every parameter group (K-Planes reference 1e-2)."""
-    adam_eps: float = 1e-15
-    """Adam epsilon (nerfstudio K-Planes: 1e-15)."""
+    lr: float = 0.02
+    """Peak Adam learning rate of every parameter group (LiveScene reference code 2e-2; K-Planes uses 1e-2)."""
+    adam_eps: float = 1e-12
+    """Adam epsilon (LiveScene reference code 1e-12; nerfstudio K-Planes 1e-15)."""
     warmup_steps: int = 512
     """Linear learning-rate warm-up steps (K-Planes: 512)."""
     lr_final_ratio: float = 0.0
