@@ -11,10 +11,7 @@ import pytest
 
 from stages.stability import CASES, run_case
 
-KNOWN_GAPS = {
-    "bad_workflow_config_wrong_type": "snakemake's schema error names common.smk and the key but not the config "
-                                      "file (asked in /work/brief/requests.md, 19:20, stability -> workflow)",
-}
+KNOWN_GAPS: dict[str, str] = {}
 """Cases that fail because an owning stage lacks the behaviour; each names where it was asked for."""
 
 
