@@ -230,7 +230,8 @@ def _frame_names(frames: Path) -> list[str]:
 
 @case("bad_masks_wrong_size", "bad_input",
       "`livescene labels` with masks of a size that is no integer factor of the frames exits 2 naming the mask "
-      "file and a fix")
+      "file and a fix; a scene dataset holding a mask of the wrong size is refused by `livescene scene validate` "
+      "and `livescene train` naming that mask")
 def bad_masks_wrong_size(ctx: CaseContext) -> Outcome:
     main = stage_main("stages.labels.cli", "labels, issue 5")
     root = case_folder(ctx, "mask-size", with_frames=True)
@@ -247,12 +248,19 @@ def bad_masks_wrong_size(ctx: CaseContext) -> Outcome:
     line = expect_refusal(main, ["--input", str(masks), "--format", "png", "--mapping", str(root / "mapping.yaml"),
                                  "--frames", str(frames), "--out", str(root / "labels"), "--no-progress"], root,
                           first.name)
-    return Outcome(short(line))
+    # the same mistake inside a scene dataset: scene validate and train must refuse it too
+    ds_root = ctx.folder("bad-mask-size-ds")
+    ds = hand_built_dataset(ds_root / "ds", n_frames=4)
+    bad = ds.root / "masks" / "00001.npy"
+    np.save(bad, np.zeros((ds.camera.height - 2, ds.camera.width, ds.n_objects + 1), dtype=bool))
+    line2 = _refused_by_validate_and_train(ds_root, bad)
+    return Outcome(short(line), {"dataset": short(line2)})
 
 
 @case("bad_mask_label_not_in_mapping", "bad_input",
       "`livescene labels` with an id map holding a value that mapping.yaml does not name exits 2 naming the "
-      "mask and the mapping, and a fix")
+      "mask and the mapping, and a fix; a dataset mask with a channel for an object mapping.yaml lacks is "
+      "refused by `livescene scene validate` and `livescene train`")
 def bad_mask_label_not_in_mapping(ctx: CaseContext) -> Outcome:
     main = stage_main("stages.labels.cli", "labels, issue 5")
     root = case_folder(ctx, "mask-label", with_frames=True)
@@ -271,7 +279,13 @@ def bad_mask_label_not_in_mapping(ctx: CaseContext) -> Outcome:
     line = expect_refusal(main, ["--input", str(masks), "--format", "png", "--mapping", str(root / "mapping.yaml"),
                                  "--frames", str(frames), "--out", str(root / "labels"), "--no-progress"], root,
                           f"{names[3]}.png", "mapping.yaml")
-    return Outcome(short(line))
+    # in a scene dataset: a mask with a channel for an object mapping.yaml does not name
+    ds_root = ctx.folder("bad-mask-label-ds")
+    ds = hand_built_dataset(ds_root / "ds", n_frames=4)
+    bad = ds.root / "masks" / "00002.npy"
+    np.save(bad, np.zeros((ds.camera.height, ds.camera.width, ds.n_objects + 2), dtype=bool))
+    line2 = _refused_by_validate_and_train(ds_root, bad, "mapping.yaml")
+    return Outcome(short(line), {"dataset": short(line2)})
 
 
 # -- key frames -> states ------------------------------------------------------------------------------------------
@@ -337,13 +351,15 @@ def _broken_dataset(ctx: CaseContext, name: str, edit: Callable[[dict], None]) -
 
 
 def _refused_by_validate_and_train(root: Path, tpath: Path, *names: str) -> str:
+    """``tpath``: the broken file inside ``root/ds``; both commands must name it."""
     from stages.scene.cli import main as scene_main
 
-    line = expect_refusal(scene_main, ["validate", str(tpath.parent)], root, str(tpath), *names)
+    data = root / "ds"
+    line = expect_refusal(scene_main, ["validate", str(data)], root, str(tpath), *names)
     require_module("stages.model.train_cli", "model, issue 6")
     from stages.model.train_cli import main as train_main
 
-    expect_refusal(train_main, ["--data", str(tpath.parent), "--out", str(root / "run"), "--max-steps", "1",
+    expect_refusal(train_main, ["--data", str(data), "--out", str(root / "run"), "--max-steps", "1",
                                 "--device", "cpu", "--no-progress"], root, str(tpath), *names)
     return line
 
@@ -421,6 +437,7 @@ def bad_workflow_config_wrong_type(ctx: CaseContext) -> Outcome:
     require(after == before, "a refused snakemake run changed files outside .snakemake/")
     require("bad-config.yaml" in said, "the error does not name the config file (bad-config.yaml): "
                                        f"{said.strip().splitlines()[:2]}")
-    lines = said.splitlines()
-    first = next((s for s in lines if "seed" in s), next((s for s in lines if "rror" in s), said.strip()[:100]))
-    return Outcome(short(first.strip()))
+    lines = [s.strip() for s in said.splitlines()]
+    named = next((s for s in lines if "bad-config.yaml" in s), "")
+    key = next((s for s in lines if "seed" in s), "")
+    return Outcome(short(f"{named.replace(str(root) + '/', '')} {key}".strip(), 160))
