@@ -15,7 +15,7 @@ vertical-align:top}th{background:#f3f3f3}td.num{text-align:right;font-variant-nu
 .missing{color:#8a5a00;background:#fff7e0;border-left:4px solid #e0a800;padding:6px 10px}
 .ok{color:#176617}.skip{color:#777}.fail{color:#b00020;font-weight:bold}
 figure{display:inline-block;margin:4px;text-align:center;font-size:12px}
-figure img{display:block;image-rendering:pixelated}
+figure img{display:block;image-rendering:pixelated;width:192px}
 .grid td{padding:2px;text-align:center;font-size:12px}.grid img{display:block;max-width:240px;width:100%}
 nav a{margin-right:10px;font-size:14px}.slider{margin:10px 0 20px}.slider img{width:320px;image-rendering:auto}
 .note{color:#555;font-size:13px}
