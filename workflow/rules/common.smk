@@ -227,7 +227,7 @@ def scene_outputs(scene):
     if needed(scene, "language_targets"):
         out["targets"] = R(scene, "language", "targets.npz")
     for m in methods(scene):
-        out[f"run_{m}"] = R(scene, "runs", m)
+        out[f"run_{m}"] = R(scene, "runs", m, "run.json")
         out[f"eval_{m}"] = R(scene, "eval", m)
         if needed(scene, f"sweep[{m}]"):
             out[f"sweep_{m}"] = R(scene, "sweep", m)
@@ -257,12 +257,17 @@ def bench_path(name):
 def evaluate_input(wildcards):
     scene = wildcards.scene
     files = dataset_input(wildcards)
-    files["run"] = R(scene, "runs", wildcards.method)
+    files["run"] = R(scene, "runs", wildcards.method, "run.json")
     if has_truth(scene):
         files["truth"] = truth_dir(scene)
         if needed(scene, "pose_compare"):
             files["pose_error"] = R(scene, "pose_error.json")
     return files
+
+
+def run_folder(wildcards, input):
+    """The run folder of a run.json input (the trainer writes run.json last: it marks a finished run)."""
+    return str(Path(input.run).parent)
 
 
 def evaluate_args(wildcards, input):

@@ -21,6 +21,7 @@ rule evaluate:
     params:
         cli=LIVESCENE,
         args=evaluate_args,
+        run=run_folder,
         views=config["evaluate"]["max_views"],
         unseen=config["evaluate"]["unseen_views"],
         device=config["device"],
@@ -32,5 +33,5 @@ rule evaluate:
     conda:
         ENV
     shell:
-        "{params.cli} evaluate --run {input.run} --data {input.data} {params.args} --out {output}"
+        "{params.cli} evaluate --run {params.run} --data {input.data} {params.args} --out {output}"
         " --max-views {params.views} --unseen-views {params.unseen} --device {params.device} > {log} 2>&1"

@@ -26,7 +26,7 @@ rule language_targets:
 rule control:
     input:
         unpack(dataset_input),
-        run=R("{scene}", "runs", "{method}"),
+        run=R("{scene}", "runs", "{method}", "run.json"),
     output:
         directory(R("{scene}", "control", "{method}")),
     log:

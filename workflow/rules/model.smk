@@ -5,7 +5,8 @@ rule train:
     input:
         unpack(train_input),
     output:
-        directory(R("{scene}", "runs", "{method}")),
+        # run.json, not the folder: an interrupted job leaves its checkpoints and the rerun resumes.
+        R("{scene}", "runs", "{method}", "run.json"),
     log:
         R("{scene}", "logs", "train_{method}.log"),
     benchmark:
@@ -13,6 +14,7 @@ rule train:
     params:
         cli=LIVESCENE,
         args=train_args,
+        run=lambda w, output: str(Path(output[0]).parent),
         preset=config["preset"],
         seconds=config["train"]["max_seconds"],
         seed=config["seed"],
@@ -26,5 +28,5 @@ rule train:
         ENV
     shell:
         "{params.cli} train --data {input.data} --method {wildcards.method} --preset {params.preset}"
-        " --out {output} --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
+        " --out {params.run} --resume --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
         " --set train.threads={threads} {params.args} --no-progress > {log} 2>&1"

@@ -4,7 +4,7 @@
 rule sweep:
     input:
         unpack(dataset_input),
-        run=R("{scene}", "runs", "{method}"),
+        run=R("{scene}", "runs", "{method}", "run.json"),
     output:
         directory(R("{scene}", "sweep", "{method}")),
     log:
@@ -13,6 +13,7 @@ rule sweep:
         R("{scene}", "benchmarks", "sweep_{method}.tsv")
     params:
         cli=LIVESCENE,
+        run=run_folder,
         steps=config["report"]["sweep_steps"],
         scale=config["report"]["sweep_scale"],
         device=config["device"],
@@ -24,7 +25,7 @@ rule sweep:
     conda:
         ENV
     shell:
-        "{params.cli} report sweep --run {input.run} --data {input.data} --out {output} --steps {params.steps}"
+        "{params.cli} report sweep --run {params.run} --data {input.data} --out {output} --steps {params.steps}"
         " --scale {params.scale} --device {params.device} > {log} 2>&1"
 
 

@@ -16,6 +16,7 @@ import yaml
 from stages.language.control_cli import main as control_main
 
 smk = snakemake  # noqa: F821 (injected by Snakemake)
+run_dir = str(Path(smk.input.run).parent)
 out = Path(smk.output[0])
 tmp = out.with_name(f".{out.name}.tmp")
 shutil.rmtree(tmp, ignore_errors=True)
@@ -32,7 +33,7 @@ with open(smk.log[0], "w") as log:
         image = f"command_{i:02d}.png"
         stdout, stderr = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-            code = control_main(["--run", smk.input.run, "--data", smk.input.data, "--device", smk.params.device,
+            code = control_main(["--run", run_dir, "--data", smk.input.data, "--device", smk.params.device,
                                  "--out", str(tmp / image), command])
         log.write(f"$ livescene control {command!r} -> exit {code}\n{stderr.getvalue()}\n")
         if code == 0:
@@ -43,6 +44,6 @@ with open(smk.log[0], "w") as log:
             result = {"command": command, "error": lines[-1] if lines else f"exit status {code}"}
         results.append(result)
 
-(tmp / "commands.json").write_text(json.dumps({"run": smk.input.run, "commands": results}, indent=2))
+(tmp / "commands.json").write_text(json.dumps({"run": run_dir, "commands": results}, indent=2))
 shutil.rmtree(out, ignore_errors=True)
 tmp.rename(out)
