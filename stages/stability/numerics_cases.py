@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import yaml
 
 from .brief_training import make_trainer, nonfinite_grads, render_held_out, require_learning, train_briefly
 from .case_context import CaseContext
@@ -149,10 +150,17 @@ def objects_touching_box(ctx: CaseContext) -> Outcome:
         data = ctx.cached("capture-demo", lambda: capture_dataset(ctx.workdir, "demo", n_frames=8))
     except CaseSkipped:
         return Outcome(metric + " (demo capture not available)", values)
+    spec = yaml.safe_load((ctx.workdir / "capture-demo" / "truth" / "spec.yaml").read_text())
+    box = np.asarray(json.loads((ctx.workdir / "capture-demo" / "truth" / "scene.json").read_text())["scene_box"])
+    # objects stand on the floor (z = box min) and, yaw 0, their backs reach position y + depth / 2
+    touching = [o["name"] for o in spec["objects"] if abs(o["position"][2] - box[0][2]) < 1e-9
+                or abs(o["position"][1] + o["size"][1] / 2 - box[1][1]) < 1e-9]
+    require(bool(touching), f"no object of the demo capture touches its scene box {box.tolist()}")
     run = train_briefly(data, ctx.folder("touching-run"), steps=ctx.steps)
     require_learning(run, "demo capture, objects against the box faces")
+    values["touching_objects"] = touching
     values["loss"] = [run.first, run.last]
-    return Outcome(f"{metric}; demo capture {run.summary()}", values)
+    return Outcome(f"{metric}; demo capture ({', '.join(touching)} on the box faces) {run.summary()}", values)
 
 
 @case("rays_missing_the_box", "numerics",
