@@ -65,9 +65,12 @@ def train(ds: SceneDataset, out: Path, preset: str, overrides: list[str], thread
         import shutil
 
         shutil.rmtree(out)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     summary = Trainer(cfg, out, device="cpu", progress=True).train()
     summary["wall_total_s"] = round(time.perf_counter() - t0, 1)
+    # CPU seconds of this process: on a shared machine the share of the cores it got is cpu_s / (wall * threads)
+    summary["cpu_s"] = round(time.process_time() - c0, 1)
+    summary["cpu_share_of_threads"] = round(summary["cpu_s"] / max(summary["wall_total_s"] * threads, 1e-9), 3)
     return summary
 
 
@@ -214,7 +217,8 @@ def main() -> int:
     if "given" in report:
         g = report["given"]
         print(f"train seconds (given)            {g['train']['train_seconds']:8.1f}   [<= 300] "
-              f"steps {g['train']['steps']}")
+              f"steps {g['train']['steps']}, CPU s {g['train']['cpu_s']} "
+              f"(share of {args.threads} threads: {g['train']['cpu_share_of_threads']:.2f})")
         print(f"held-out PSNR at truth states dB {g['psnr_heldout_db']:8.2f}   [>= 26]"
               + (f"  (vs lossless frames {g['psnr_heldout_vs_lossless_db']:.2f})"
                  if g["psnr_heldout_vs_lossless_db"] is not None else ""))
@@ -226,7 +230,9 @@ def main() -> int:
                   f" inside: model {d['model_inside']:.2f}")
     if "learned" in report:
         lr = report["learned"]
-        print(f"train seconds (learned)          {lr['train']['train_seconds']:8.1f}   [<= 300]")
+        print(f"train seconds (learned)          {lr['train']['train_seconds']:8.1f}   [<= 300] "
+              f"steps {lr['train']['steps']}, CPU s {lr['train']['cpu_s']} "
+              f"(share of {args.threads} threads: {lr['train']['cpu_share_of_threads']:.2f})")
         print(f"learned states MAE, non-key      {lr['state_mae_other_frames']:8.3f}   [<= 0.1] "
               f"{ {k: round(v, 3) for k, v in lr['state_mae_per_object'].items()} }")
         print(f"held-out PSNR at learned states  {lr['psnr_heldout_learned_states_db']:8.2f}")
