@@ -62,3 +62,20 @@ def test_learned_state_rays_carry_no_states_and_eval_uses_the_state_field(tiny_d
     given = Trainer(tiny_config(tiny_dataset.root, steps=1), tmp_path / "given", device="cpu", progress=False)
     rays = given.eval_rays.batch(torch.arange(8)).rays
     assert rays.states is not None and np.isfinite(rays.states.numpy()).all()
+
+
+def test_rgb_gradient_reaches_learned_states_through_k(tiny_dataset, tmp_path, tiny_config):
+    cfg = tiny_config(tiny_dataset.root, "model.state.mode=learned", "model.probability.rejection_threshold=0", steps=1)
+    trainer = Trainer(cfg, tmp_path / "learned", device="cpu", progress=False)
+    model = trainer.model
+    with torch.no_grad():  # k planes start at 1 (no k dependence); give them some so d rgb / d kappa != 0
+        for grid in model.field.encoding.grids:
+            for i in grid.k_plane_indices:
+                grid.planes[i].uniform_(0.5, 1.5)
+    batch = trainer.train_rays.sample(64, torch.Generator().manual_seed(0))
+    out = model(batch.rays, step=100)
+    torch.nn.functional.mse_loss(out["rgb"], batch.rgb).backward()
+    grads = [p.grad for p in model.state_field.parameters()]
+    assert all(g is not None for g in grads) and any(float(g.abs().sum()) > 0 for g in grads)
+    spatial = model.field.encoding.grids[0].planes[0]  # spatial planes still learn from rgb
+    assert spatial.grad is not None and float(spatial.grad.abs().sum()) > 0
