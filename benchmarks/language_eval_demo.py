@@ -18,7 +18,7 @@ For each capture (nothing here asserts a target; it prints what it measures):
 Timings on the shared 2-core development machine are pessimistic (other engineers' jobs run at the same time).
 
     HF_HUB_OFFLINE=1 .venv/bin/python benchmarks/language_eval_demo.py [--work /tmp/language_eval]
-        [--captures demo,kitchen] [--max-seconds 240] [--max-views 10] [--scale 0.5]
+        [--captures demo,kitchen] [--max-seconds 600] [--max-views 10] [--scale 0.5] [--train-set KEY=VALUE]
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def sh(args: list[str], log: Path | None = None) -> subprocess.CompletedProcess:
     return proc
 
 
-def prepare(name: str, work: Path, max_seconds: float) -> tuple[Path, Path, Path]:
+def prepare(name: str, work: Path, max_seconds: float, train_set: list[str]) -> tuple[Path, Path, Path]:
     capture, ds, run = work / name / "capture", work / name / "dataset", work / name / "run"
     if not (capture / "truth" / "transforms.json").is_file():
         sh([*LIVESCENE, "capture", "--spec", str(ROOT / "config" / "captures" / f"{name}.yaml"), "--out",
@@ -67,7 +67,8 @@ def prepare(name: str, work: Path, max_seconds: float) -> tuple[Path, Path, Path
         sh([*LIVESCENE, "language", "targets", "--data", str(ds), "--out", str(targets)])
     if not (run / "model.pt").is_file():
         sh([*LIVESCENE, "train", "--data", str(ds), "--out", str(run), "--language-targets", str(targets),
-            "--max-seconds", str(max_seconds), "--device", "cpu", "--no-progress"], work / name / "train.log")
+            "--max-seconds", str(max_seconds), "--device", "cpu", "--no-progress",
+            *[a for kv in train_set for a in ("--set", kv)]], work / name / "train.log")
     return capture, ds, run
 
 
@@ -127,20 +128,23 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--work", default="/tmp/language_eval", help="folder for captures, datasets, runs (reused)")
     p.add_argument("--captures", default="demo,kitchen")
-    p.add_argument("--max-seconds", type=float, default=240.0, help="training wall-clock budget per capture")
+    p.add_argument("--max-seconds", type=float, default=600.0, help="training wall-clock budget per capture")
     p.add_argument("--max-views", type=int, default=10, help="held-out views evaluated per capture")
     p.add_argument("--unseen-views", type=int, default=2)
     p.add_argument("--scale", type=float, default=0.5, help="evaluate at this fraction of the image size (CPU)")
+    p.add_argument("--train-set", action="append", default=[], metavar="KEY=VALUE",
+                   help="config override for training, e.g. model.losses.focal_mask=0.1 (repeatable)")
     p.add_argument("--no-commands", action="store_true")
     args = p.parse_args(argv)
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     for name in [c.strip() for c in args.captures.split(",") if c.strip()]:
         print(f"-- {name}", flush=True)
-        capture, ds, run = prepare(name, work, args.max_seconds)
+        capture, ds, run = prepare(name, work, args.max_seconds, args.train_set)
         ev = work / name / "evaluate"
         sh([*LIVESCENE, "evaluate", "--run", str(run), "--data", str(ds), "--truth", str(capture), "--out", str(ev),
-            "--max-views", str(args.max_views), "--unseen-views", str(args.unseen_views), "--scale", str(args.scale)], work / name / "eval.log")
+            "--max-views", str(args.max_views), "--unseen-views", str(args.unseen_views), "--scale", str(args.scale)],
+           work / name / "eval.log")
         metrics = json.loads((ev / "metrics.json").read_text())
         run_json = json.loads((run / "run.json").read_text()) if (run / "run.json").is_file() else {}
         report(name, metrics, run_json)
