@@ -111,7 +111,9 @@ def headline(metrics: dict) -> dict:
         for key, value in ground.items():
             if key.startswith("miou"):
                 out[f"grounding_{key}"] = value
-        out["grounding_per_query"] = {q["query"]: q["probs"]["iou"]["mean"] for q in ground["queries"]}
+        out["grounding_per_query"] = {f'{q["query"]} ({q["kind"]} of {q["object"]})':
+                                      {src: q[src]["iou"]["mean"] for src in ground["sources"]}
+                                      for q in ground["queries"]}
     else:
         out["grounding"] = ground.get("status")
     return out

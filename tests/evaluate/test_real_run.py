@@ -84,6 +84,8 @@ def test_evaluate_a_real_run_against_the_truth_renderer(real_run, tmp_path, monk
     names = {q["query"] for q in ground["queries"] if q["kind"] == "name"}
     assert names == {n.replace("_", " ") for n in ds.objects}
     assert {q["kind"] for q in ground["queries"]} == {"name", "synonym"}
+    printed = headline["grounding_per_query"]
+    assert len(printed) == len(ground["queries"]) and all(set(v) == set(ground["sources"]) for v in printed.values())
     maps = sorted((out / "grounding").glob("*.png"))
     assert maps and all(cv2.imread(str(p), cv2.IMREAD_UNCHANGED).shape == (24, 32) for p in maps)
 
