@@ -23,6 +23,7 @@ class CaseContext:
     threads: int = 1
     """torch CPU threads (1: the machines running this are shared, and 2 threads on a busy 2-core box are slower)."""
     _cache: dict[str, Any] = field(default_factory=dict)
+    """Results of ``cached`` by key (scenes and runs several cases share)."""
 
     def __post_init__(self) -> None:
         self.workdir = Path(self.workdir)

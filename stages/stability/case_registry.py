@@ -76,13 +76,19 @@ class CaseResult:
     """One row of the stability table."""
 
     name: str
+    """The case's name."""
     group: str
+    """The case's group (one of GROUPS)."""
     result: str
     """pass, fail, skip or error (an unexpected exception: a bug the case found)."""
     metric: str
+    """The one-line measurement of a passing case ('-' otherwise)."""
     checks: str
+    """What the case asserts."""
     seconds: float
+    """Wall time of the case, including building its inputs."""
     values: dict[str, Any] = field(default_factory=dict)
+    """The numbers behind the metric."""
     detail: str = ""
     """Why it failed or was skipped."""
 
