@@ -36,13 +36,17 @@ def run_suite(cases: list[Case], *, quick: bool = False, workdir: Path | None = 
     """Run ``cases`` (each in its own scratch folder) and return the JSON summary."""
     t0 = time.perf_counter()
     rows: list[CaseResult] = []
-    with tempfile.TemporaryDirectory(prefix="livescene-stability-") as tmp:
-        ctx = CaseContext(Path(workdir) if workdir else Path(tmp), quick=quick, device=device, threads=threads)
-        for c in cases:
-            row = run_case(c, ctx)
-            rows.append(row)
-            if on_result is not None:
-                on_result(row)
+    torch_threads = torch.get_num_threads()
+    try:
+        with tempfile.TemporaryDirectory(prefix="livescene-stability-") as tmp:
+            ctx = CaseContext(Path(workdir) if workdir else Path(tmp), quick=quick, device=device, threads=threads)
+            for c in cases:
+                row = run_case(c, ctx)
+                rows.append(row)
+                if on_result is not None:
+                    on_result(row)
+    finally:
+        torch.set_num_threads(torch_threads)  # the cases pin torch to `threads`; the caller gets its own back
     counts = Counter(r.result for r in rows)
     return {
         "format": SUMMARY_FORMAT,

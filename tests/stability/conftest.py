@@ -1,4 +1,5 @@
-"""One CaseContext per test session: the quick settings of `livescene stability --quick`, tiny scenes shared."""
+"""One CaseContext per test module: the quick settings of `livescene stability --quick`, tiny scenes shared;
+torch's thread count is restored afterwards for the tests that follow."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import torch
 from stages.stability import CaseContext
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def stability_ctx(tmp_path_factory) -> CaseContext:
     threads = torch.get_num_threads()
     ctx = CaseContext(tmp_path_factory.mktemp("stability"), quick=True, threads=1)
