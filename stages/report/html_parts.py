@@ -17,7 +17,8 @@ vertical-align:top}th{background:#f3f3f3}td.num{text-align:right;font-variant-nu
 figure{display:inline-block;margin:4px;text-align:center;font-size:12px}
 figure img{display:block;image-rendering:pixelated;width:192px}
 .grid td{padding:2px;text-align:center;font-size:12px}.grid img{display:block;max-width:240px;width:100%}
-nav a{margin-right:10px;font-size:14px}.slider{display:inline-block;margin:10px 16px 20px 0;vertical-align:top}.slider img{width:288px;image-rendering:auto}
+nav a{margin-right:10px;font-size:14px}
+.slider{display:inline-block;margin:10px 16px 20px 0;vertical-align:top}.slider img{width:288px;image-rendering:auto}
 .note{color:#555;font-size:13px}
 """
 

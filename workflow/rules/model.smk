@@ -17,6 +17,7 @@ rule train:
         run=lambda w, output: str(Path(output[0]).parent),
         preset=config["preset"],
         seconds=config["train"]["max_seconds"],
+        eval_every=config["train"]["eval_every"],
         seed=config["seed"],
         device=config["device"],
     threads: 2
@@ -29,4 +30,4 @@ rule train:
     shell:
         "{params.cli} train --data {input.data} --method {wildcards.method} --preset {params.preset}"
         " --out {params.run} --resume --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
-        " --set train.threads={threads} {params.args} --no-progress > {log} 2>&1"
+        " --set train.threads={threads} --set train.eval_every={params.eval_every} {params.args} --no-progress > {log} 2>&1"
