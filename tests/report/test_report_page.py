@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from conftest import ARTIFACTS, make_fake_results
+from report_browser import ARTIFACTS, make_fake_results
 
 from stages.report.cli import main as report_main
 

@@ -18,7 +18,7 @@ def test_tiny_scene_end_to_end(workflow_copy):
     config = wf.write_config(train={"max_seconds": 6}, evaluate={"max_views": 1, "unseen_views": 1},
                              report={"sweep_steps": 2, "sweep_scale": 0.5, "grid_views": 1},
                              commands=["close everything"], stability={"run": False})
-    run = wf.snakemake("--cores", "2", "--configfile", str(config), "all", timeout=900)
+    run = wf.snakemake("all", "--cores", "2", "--configfile", str(config), timeout=900)
     assert run.code == 0, run.output[-4000:]
 
     results = wf.root / "results" / "tiny"
@@ -44,10 +44,10 @@ def test_tiny_scene_end_to_end(workflow_copy):
     index = (wf.root / "reports" / "index.html").read_text()
     assert 'href="scenes/tiny.html"' in index
 
-    again = wf.snakemake("-n", "--cores", "2", "--configfile", str(config), "all")
+    again = wf.snakemake("all", "-n", "--cores", "2", "--configfile", str(config))
     assert again.code == 0 and "Nothing to be done" in again.output
 
-    report = wf.snakemake("--cores", "1", "--configfile", str(config), "--report", "report.zip", "all")
+    report = wf.snakemake("all", "--cores", "1", "--report", "report.zip", "--configfile", str(config))
     assert report.code == 0, report.output[-3000:]
     names = zipfile.ZipFile(wf.root / "report.zip").namelist()
     assert any(n.endswith("tiny.html") for n in names) and any(n.endswith("pose_error.json") for n in names)

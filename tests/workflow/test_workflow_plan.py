@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from conftest import WorkflowCopy
+from workflow_copy import WorkflowCopy
 
 from stages.scene import write_yaml
 
