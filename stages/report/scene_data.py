@@ -169,4 +169,7 @@ def collect_scene(scene: str, results: str | Path, *, data: str | Path | None, t
         sd.methods.append(m)
     if stability:
         sd.stability = read_json(Path(stability))
+        shared = read_benchmarks(Path(stability).parent)  # the suite runs once for all scenes
+        if "benchmark" in shared:
+            sd.benchmarks["stability"] = shared["benchmark"]
     return sd
