@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import fcntl
 import json
 import os
 import subprocess
@@ -22,8 +23,13 @@ class Chromium:
     """A headless Chromium page controlled with CDP messages (JSON, NUL-terminated) over a pipe."""
 
     def __init__(self, binary: str, profile: Path) -> None:
-        to_child_r, self._to_child = os.pipe()
-        self._from_child, from_child_w = os.pipe()
+        pipe_r, self._to_child = os.pipe()
+        self._from_child, pipe_w = os.pipe()
+        # Move the child's ends above fd 4 first: dup2 onto the same number would keep close-on-exec,
+        # and one end could sit on the other's target number.
+        to_child_r, from_child_w = fcntl.fcntl(pipe_r, fcntl.F_DUPFD, 10), fcntl.fcntl(pipe_w, fcntl.F_DUPFD, 10)
+        os.close(pipe_r)
+        os.close(pipe_w)
 
         def wire_fds() -> None:  # the child reads commands on fd 3 and writes replies on fd 4
             os.dup2(to_child_r, 3)
