@@ -68,8 +68,10 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _scene(args: argparse.Namespace) -> int:
+    from stages.scene.atomic_io import write_text
+
     from .scene_data import collect_scene
-    from .scene_page import build_scene_page, scene_summary, write_text_atomic
+    from .scene_page import build_scene_page, scene_summary
 
     try:
         plan = json.loads(args.plan_json)
@@ -79,7 +81,7 @@ def _scene(args: argparse.Namespace) -> int:
     sd = collect_scene(args.scene, args.results, data=args.data or None, truth=args.truth or None, methods=methods,
                        plan=plan, stability=args.stability or None)
     html = build_scene_page(sd, views=args.views)
-    write_text_atomic(Path(args.out), html)
+    write_text(Path(args.out), html)
     if args.summary:
         write_json(args.summary, scene_summary(sd))
     print(f"{args.out}: {len(html) / 1e6:.2f} MB")
@@ -87,9 +89,10 @@ def _scene(args: argparse.Namespace) -> int:
 
 
 def _index(args: argparse.Namespace) -> int:
-    from .index_page import build_index
-    from .scene_page import write_text_atomic
+    from stages.scene.atomic_io import write_text
 
-    write_text_atomic(Path(args.out), build_index(args.summaries))
+    from .index_page import build_index
+
+    write_text(Path(args.out), build_index(args.summaries))
     print(args.out)
     return 0

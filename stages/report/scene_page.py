@@ -6,7 +6,6 @@ import json
 import math
 import re
 from html import escape
-from pathlib import Path
 from typing import Any
 
 from .html_parts import fmt, missing, page, table
@@ -356,11 +355,3 @@ def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
     body = head + nav + "".join(f'<section id="{k}"><h2>{escape(t)}</h2>{bodies[k]}</section>' for k, t in SECTIONS)
     script = SLIDER_SCRIPT % json.dumps(images) if images else ""
     return page(f"LiveScene report: {sd.scene}", body, script)
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    from stages.scene import atomic_path
-
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(text)
-        Path(tmp).chmod(0o644)  # mkstemp makes 0600; a report is for reading
