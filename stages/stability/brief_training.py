@@ -14,13 +14,12 @@ from typing import Any
 
 import torch
 
+from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
+
 from .case_registry import require, require_module
 
 TINY_MODEL = [
-    "model.field.base_resolution=8", "model.field.k_resolution=4", "model.field.scales=[1]",
-    "model.field.channels=4", "model.field.hidden=16", "model.field.color_hidden=16",
-    "model.proposal.resolutions=[[8,4]]", "model.proposal.hidden=8", "model.probability.resolution=8",
-    "model.probability.hidden=8", "model.sampling.num_proposal_samples=[12]", "model.sampling.num_samples=6",
+    *TINY_MODEL_OVERRIDES,
     "train.batch_rays=64", "train.warmup_steps=2", "train.eval_every=0", "train.eval_rays=256",
     "train.checkpoint_every=0", "train.render_chunk=512", "train.threads=0",
     # no wall-clock budget: with one, the LR decay follows elapsed time and no two runs are bit-identical

@@ -8,12 +8,10 @@ import pytest
 import torch
 
 from stages.model import Trainer, load_config
+from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
 
 TINY = [
-    "model.field.base_resolution=8", "model.field.k_resolution=4", "model.field.scales=[1]",
-    "model.field.channels=4", "model.field.hidden=16", "model.field.color_hidden=16",
-    "model.proposal.resolutions=[[8,4]]", "model.proposal.hidden=8", "model.probability.resolution=8",
-    "model.probability.hidden=8", "model.sampling.num_proposal_samples=[12]", "model.sampling.num_samples=6",
+    *TINY_MODEL_OVERRIDES,
     "train.batch_rays=64", "train.warmup_steps=2", "train.eval_every=2", "train.eval_rays=64",
     "train.checkpoint_every=100", "train.render_chunk=256", "train.threads=1", "train.max_seconds=0",
 ]
