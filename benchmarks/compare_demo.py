@@ -21,23 +21,9 @@ import json
 from pathlib import Path
 
 import pandas as pd
+from demo_dataset import cached_demo_dataset
 
 from stages.model.method_comparison import ALL_METHODS, CompareConfig, compare_methods, format_table
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def prepare(work: Path, capture: Path | None) -> Path:
-    from stages.capture import capture_to_dataset, generate_capture, load_spec
-
-    if capture is None:
-        capture = work / "capture"
-        if not (capture / "truth" / "transforms.json").is_file():
-            generate_capture(load_spec(ROOT / "config" / "captures" / "demo.yaml"), capture)
-    ds_dir = work / "dataset"
-    if not (ds_dir / "transforms.json").is_file():
-        capture_to_dataset(capture, ds_dir, split="alternate")
-    return ds_dir
 
 
 def main() -> int:
@@ -52,7 +38,7 @@ def main() -> int:
     p.add_argument("--replay", action="store_true", help="retrain for the recorded steps and compare")
     args = p.parse_args()
     work = Path(args.work)
-    data = prepare(work, Path(args.capture) if args.capture else None)
+    _, data = cached_demo_dataset(work, Path(args.capture) if args.capture else None)
     out = work / "compare"
     cfg = CompareConfig(data=str(data), out=str(out), methods=args.methods, budget_s=args.budget_s, seed=args.seed,
                         eval_frames=args.eval_frames, eval_scale=args.eval_scale)

@@ -32,6 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
+from demo_dataset import cached_demo_dataset
 
 from stages.model import Trainer, load_config, load_run
 from stages.scene import SceneDataset, read_scene
@@ -46,15 +47,7 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 def prepare(work: Path, capture: Path | None) -> tuple[Path, SceneDataset]:
     """The capture folder and its truth scene dataset (both cached under ``work``)."""
-    from stages.capture import capture_to_dataset, generate_capture, load_spec
-
-    if capture is None:
-        capture = work / "capture"
-        if not (capture / "truth" / "transforms.json").is_file():
-            generate_capture(load_spec(ROOT / "config" / "captures" / "demo.yaml"), capture)
-    ds_dir = work / "dataset"
-    if not (ds_dir / "transforms.json").is_file():
-        capture_to_dataset(capture, ds_dir, split="alternate")
+    capture, ds_dir = cached_demo_dataset(work, capture)
     return capture, read_scene(ds_dir)
 
 
