@@ -3,7 +3,7 @@
 
 run:
 	@scripts/bootstrap.sh
-	.venv/bin/snakemake --cores 2
+	.venv/bin/snakemake --cores 2 --workflow-profile workflow/profiles/default
 
 test:
 	@scripts/bootstrap.sh --test
