@@ -113,7 +113,7 @@ class _ReplayableTrainer(Trainer):
         self.fractions.append(float(self.time_fraction))
         result = super().train_step()
         if self.replay is not None and self.step + 1 >= len(self.replay):
-            self._stop_reason = "step_budget"
+            self.request_stop("step_budget")
         return result
 
 

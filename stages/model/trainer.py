@@ -325,8 +325,15 @@ class Trainer:
         return psnr_of(err / max(n, 1))
 
     # -- the loop -------------------------------------------------------------------------------------------
+    def request_stop(self, reason: str) -> None:
+        """Stop before the next step through the normal exit (final eval, checkpoint, model.pt, run.json).
+
+        ``reason`` becomes run.json's status; "sigterm" is special: the run is left resumable, without model.pt.
+        """
+        self._stop_reason = reason
+
     def _on_sigterm(self, signum: int, frame: Any) -> None:
-        self._stop_reason = "sigterm"
+        self.request_stop("sigterm")
 
     def _write_log(self) -> None:
         with atomic_path(self.out / "train_log.csv", suffix=".csv") as tmp, tmp.open("w", newline="") as fh:
