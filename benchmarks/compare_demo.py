@@ -6,7 +6,8 @@
    ``cpu-demo`` preset (+ its overlay in config/model/methods/), seed 0, one process per method, 2 torch
    threads; held-out frames are rendered and scored (PSNR, SSIM);
 3. with ``--replay``, trains every method again for the recorded steps and schedule and prints whether each
-   run's loss curve and PSNR are identical (reproducibility with the seed).
+   run's loss curve and PSNR are identical (reproducibility with the seed); a comparison already in the work
+   folder is replayed instead of being run again.
 
 Nothing is asserted: it prints measured numbers. Timings on the shared 2-core machine are pessimistic and
 noisy (other jobs run at the same time), so the step count each method reaches in the budget varies.
@@ -42,7 +43,11 @@ def main() -> int:
     out = work / "compare"
     cfg = CompareConfig(data=str(data), out=str(out), methods=args.methods, budget_s=args.budget_s, seed=args.seed,
                         eval_frames=args.eval_frames, eval_scale=args.eval_scale)
-    print(format_table(compare_methods(cfg)))
+    if args.replay and (out / "compare.csv").is_file():  # replay an earlier comparison in this work folder
+        print(f"[compare] replaying {out} (delete it to compare afresh)")
+        print(format_table(pd.read_csv(out / "compare.csv")))
+    else:
+        print(format_table(compare_methods(cfg)))
     if args.replay:
         again = compare_methods(CompareConfig(**{**cfg.__dict__, "out": str(work / "replay"), "replay": str(out)}))
         print(format_table(again))
