@@ -60,6 +60,12 @@ def _grids(encoding: KPlanesEncoding | MultiScaleKPlanes) -> list[KPlanesEncodin
     return list(encoding.grids) if isinstance(encoding, MultiScaleKPlanes) else [encoding]
 
 
+def _zero(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
+    """A 0 on the encoding's device and dtype, for a term with nothing to sum."""
+    param = next(encoding.parameters(), None)
+    return param.new_zeros(()) if param is not None else torch.zeros(())
+
+
 def plane_tv(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
     """Mean squared neighbour difference over every plane; k planes only along their spatial axis (W)."""
     total, count = None, 0
@@ -72,13 +78,13 @@ def plane_tv(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
                 tv = tv + (plane[..., 1:, :] - plane[..., :-1, :]).square().mean()
             total = tv if total is None else total + tv
             count += 1
-    return total / max(count, 1) if total is not None else torch.zeros(())
+    return total / max(count, 1) if total is not None else _zero(encoding)
 
 
 def k_planes_l1(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
     """Mean |1 - plane| over the planes with a k axis (0 when the field ignores k)."""
     terms = [(1.0 - grid.planes[i]).abs().mean() for grid in _grids(encoding) for i in grid.k_plane_indices]
-    return torch.stack(terms).mean() if terms else torch.zeros(())
+    return torch.stack(terms).mean() if terms else _zero(encoding)
 
 
 def k_smoothness(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
@@ -89,7 +95,7 @@ def k_smoothness(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
             p = grid.planes[i]
             if p.shape[-2] >= 3:
                 terms.append((p[..., 2:, :] - 2 * p[..., 1:-1, :] + p[..., :-2, :]).square().mean())
-    return torch.stack(terms).mean() if terms else torch.zeros(())
+    return torch.stack(terms).mean() if terms else _zero(encoding)
 
 
 def focal_mask_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, gamma: float = 1.5) -> torch.Tensor:

@@ -118,3 +118,10 @@ def test_samplers_bins_sorted_inside_ray_and_pdf_follows_weights():
     fine = pdf_samples(s, w, 32, jitter=False, padding=0.0)
     inside = (fine.mids >= s.bins[:, 5:6]) & (fine.mids <= s.bins[:, 6:7])
     assert inside.float().mean() > 0.9
+
+
+def test_k_regularisers_of_a_field_without_k_planes_follow_its_dtype():
+    """A spatial-only field (no k axis) gives a 0 on the field's own device and dtype, not a CPU float32."""
+    enc = KPlanesEncoding([4, 4, 4], 2).to(torch.float64)
+    for term in (L.k_planes_l1(enc), L.k_smoothness(enc)):
+        assert term.item() == 0 and term.dtype == torch.float64 and term.device == enc.planes[0].device
