@@ -240,12 +240,30 @@ class TrainConfig:
     """Checkpoint every this many steps (and at the end, on SIGTERM and on the time budget)."""
     keep_checkpoints: int = 2
     """How many step checkpoints to keep."""
+    log_every: int = 10
+    """Steps between reads of the queued steps' loss terms and finite checks (one host sync each; also at eval and
+    checkpoint steps). Steps in between never wait for the device; a skipped step is named at the next read."""
     max_nonfinite: int = 20
     """Stop after this many consecutive steps with a non-finite loss or gradient."""
     render_chunk: int = 4096
     """Rays per forward pass when rendering whole images."""
     threads: int = 0
     """torch CPU threads (0 = leave torch's default)."""
+    compile: bool = False
+    """torch.compile the fields' forward passes (fullgraph, dynamic shapes). Off by default: unmeasured on CUDA,
+    and on the CPU the inductor build takes longer than a cpu-demo run saves (docs/model.md)."""
+
+
+@dataclass
+class TrustConfig:
+    """When a trained run's numbers are results: below these the report flags the run instead of ranking it."""
+
+    min_steps: int = 30000
+    """Fewer optimisation steps than this: undertrained for the preset (a number from too little training)."""
+    min_psnr: float = 20.0
+    """Held-out PSNR (dB) below this: the renders are not trustworthy."""
+    min_grounding_miou: float = 0.5
+    """Grounding mIoU below this: the probability field has not found the objects."""
 
 
 @dataclass
@@ -266,6 +284,8 @@ class RunConfig:
     """Model hyperparameters."""
     train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
     """Training schedule."""
+    trust: TrustConfig = dataclasses.field(default_factory=TrustConfig)
+    """Floors under which the report calls a run undertrained or untrustworthy."""
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

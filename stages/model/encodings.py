@@ -25,25 +25,39 @@ def all_pairs(n_dims: int) -> list[tuple[int, int]]:
     return list(itertools.combinations(range(n_dims), 2))
 
 
-def sample_plane_cn(plane: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
-    """Bilinear sample of ``plane`` [1, C, H, W] at ``coords`` [N, 2] in [-1, 1] (x -> W, y -> H) -> [C, N].
+PlaneGrids = dict[tuple[tuple[int, int], ...], torch.Tensor]
+"""Sampling grids [G, N, 1, 2] by the axis pairs they hold: built once per batch of points and shared by
+every field and scale that samples planes of the same pairs (the spatial xy, xz, yz grid of one level
+serves the probability tri-plane, every scale of the radiance field and the proposal field)."""
 
-    ``align_corners=True``: -1 and 1 hit the first and last grid vertices, so a
-    plane of resolution R has R vertices spanning the box. The [C, N] layout is
-    grid_sample's own (contiguous), so products of planes need no transposed copies.
+
+def plane_grid(coords: torch.Tensor, pairs: Sequence[tuple[int, int]], detach: bool,
+               cache: PlaneGrids | None = None) -> torch.Tensor:
+    """``coords`` [N, D] -> the grid [G, N, 1, 2] of the G axis ``pairs``, memoised in ``cache``.
+
+    A cache belongs to one set of points: every coordinate array handed to it
+    must agree on the axes its pairs read (positions first, then k or states).
     """
-    grid = coords.reshape(1, -1, 1, 2).to(plane.dtype)
-    out = F.grid_sample(plane, grid, mode="bilinear", padding_mode="border", align_corners=True)  # [1, C, N, 1]
-    return out[0, :, :, 0]
-
-
-def sample_plane(plane: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
-    """Bilinear sample of ``plane`` [1, C, H, W] at ``coords`` [N, 2] in [-1, 1] (x -> W, y -> H) -> [N, C]."""
-    return sample_plane_cn(plane, coords).transpose(0, 1)
+    key = tuple(pairs)
+    if cache is not None and key in cache:
+        return cache[key]
+    cols = [c for pair in pairs for c in pair]
+    grid = coords[:, cols].view(-1, len(pairs), 2).transpose(0, 1).unsqueeze(2).contiguous()  # strided: 4x slower
+    if detach:
+        # positions never need a gradient; without it grid_sample skips the coordinate gradient, which coords
+        # would otherwise require in learned-state mode (the k column carries the state's gradient)
+        grid = grid.detach()
+    if cache is not None:
+        cache[key] = grid
+    return grid
 
 
 class KPlanesEncoding(nn.Module):
     """One scale of K-Planes: planes over ``pairs`` of an N-D coordinate, combined by product.
+
+    Planes of the same shape and kind (spatial, or touching a non-spatial axis)
+    are stored stacked in one parameter ``[G, C, H, W]`` and sampled by one
+    ``grid_sample`` call: LiveScene's six planes per scale take two calls, not six.
 
     Args:
         resolution: vertices per axis, one entry per input dimension.
@@ -62,20 +76,36 @@ class KPlanesEncoding(nn.Module):
         self.channels = int(channels)
         self.pairs = [tuple(p) for p in (pairs if pairs is not None else all_pairs(self.n_dims))]
         self.spatial_dims = spatial_dims
-        self.planes = nn.ParameterList()
-        for a, b in self.pairs:
+        groups: dict[tuple[int, int, bool], list[int]] = {}
+        for i, (a, b) in enumerate(self.pairs):
             if not (0 <= a < self.n_dims and 0 <= b < self.n_dims and a != b):
                 raise ValueError(f"plane pair {(a, b)} is not two distinct axes of a {self.n_dims}-D coordinate")
-            # [1, C, res_b, res_a]: grid_sample reads the first coordinate along W (axis a), the second along H
-            plane = torch.empty(1, self.channels, self.resolution[b], self.resolution[a])
-            if self.touches_non_spatial(a, b):
-                nn.init.ones_(plane)
+            # a plane is [C, res_b, res_a]: grid_sample reads the first coordinate along W (axis a), the second along H
+            groups.setdefault((self.resolution[b], self.resolution[a], self.touches_non_spatial(a, b)), []).append(i)
+        self.group_members = list(groups.values())
+        self.slot = {i: (g, j) for g, members in enumerate(self.group_members) for j, i in enumerate(members)}
+        self.plane_groups = nn.ParameterList()
+        for (h, w, non_spatial), members in groups.items():
+            stack = torch.empty(len(members), self.channels, h, w)
+            if non_spatial:
+                nn.init.ones_(stack)
             else:
-                nn.init.uniform_(plane, float(init_range[0]), float(init_range[1]))
-            self.planes.append(nn.Parameter(plane))
+                nn.init.uniform_(stack, float(init_range[0]), float(init_range[1]))
+            self.plane_groups.append(nn.Parameter(stack))
 
     def touches_non_spatial(self, a: int, b: int) -> bool:
         return a >= self.spatial_dims or b >= self.spatial_dims
+
+    def group_pairs(self, g: int) -> list[tuple[int, int]]:
+        return [self.pairs[i] for i in self.group_members[g]]
+
+    def group_is_spatial(self, g: int) -> bool:
+        return not self.touches_non_spatial(*self.pairs[self.group_members[g][0]])
+
+    @property
+    def planes(self) -> list[torch.Tensor]:
+        """Every plane as a ``[1, C, H, W]`` view of its group, in ``pairs`` order (in-place edits reach the group)."""
+        return [self.plane_groups[g][j : j + 1] for g, j in (self.slot[i] for i in range(len(self.pairs)))]
 
     @property
     def k_plane_indices(self) -> list[int]:
@@ -86,19 +116,20 @@ class KPlanesEncoding(nn.Module):
     def out_dim(self) -> int:
         return self.channels
 
-    def forward(self, coords: torch.Tensor) -> torch.Tensor:
-        """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
+    def forward_cn(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
+        """``coords`` [N, n_dims] in [-1, 1] -> features [C, N] (grid_sample's layout)."""
         out: torch.Tensor | None = None
-        for plane, (a, b) in zip(self.planes, self.pairs, strict=True):
-            xy = coords[:, [a, b]]
-            if not self.touches_non_spatial(a, b):
-                # positions never need a gradient; without it grid_sample skips the coordinate gradient, which
-                # coords would otherwise require in learned-state mode (the k column carries the state's gradient)
-                xy = xy.detach()
-            f = sample_plane_cn(plane, xy)
-            out = f if out is None else out * f
+        for g, stack in enumerate(self.plane_groups):
+            grid = plane_grid(coords, self.group_pairs(g), self.group_is_spatial(g), cache).to(stack.dtype)
+            f = F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
+            for j in range(f.shape[0]):  # products by hand: prod()'s backward looks for zeros (a host sync)
+                out = f[j] if out is None else out * f[j]
         assert out is not None
-        return out.transpose(0, 1)
+        return out
+
+    def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
+        """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
+        return self.forward_cn(coords, cache).transpose(0, 1)
 
 
 class MultiScaleKPlanes(nn.Module):
@@ -117,8 +148,10 @@ class MultiScaleKPlanes(nn.Module):
     def out_dim(self) -> int:
         return sum(g.out_dim for g in self.grids)
 
-    def forward(self, coords: torch.Tensor) -> torch.Tensor:
-        return torch.cat([g(coords) for g in self.grids], dim=-1)
+    def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
+        # every scale samples the same pairs at the same points: one grid per pair group serves them all
+        cache = {} if cache is None else cache
+        return torch.cat([g.forward_cn(coords, cache) for g in self.grids], dim=0).transpose(0, 1)
 
 
 class SHEncoding(nn.Module):

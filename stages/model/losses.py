@@ -66,45 +66,56 @@ def _zero(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
     return param.new_zeros(()) if param is not None else torch.zeros(())
 
 
+def _stacks(encoding: KPlanesEncoding | MultiScaleKPlanes, k_only: bool = False) -> list[tuple[torch.Tensor, bool]]:
+    """Every stacked plane group ``[G, C, H, W]`` with whether it touches a non-spatial axis.
+
+    Regularisers work on whole stacks (one op for G planes, and no slice of a
+    stack whose backward would write a full-size zero gradient per plane).
+    """
+    return [(stack, not grid.group_is_spatial(g)) for grid in _grids(encoding)
+            for g, stack in enumerate(grid.plane_groups) if not k_only or not grid.group_is_spatial(g)]
+
+
 def plane_tv(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
-    """Mean squared neighbour difference over every plane; k planes only along their spatial axis (W)."""
-    total, count = None, 0
-    for grid in _grids(encoding):
-        k_idx = set(grid.k_plane_indices)
-        for i, plane in enumerate(grid.planes):
-            # a k plane (a, k) stores the spatial axis a along W, k along H
-            tv = (plane[..., :, 1:] - plane[..., :, :-1]).square().mean()
-            if i not in k_idx:
-                tv = tv + (plane[..., 1:, :] - plane[..., :-1, :]).square().mean()
-            total = tv if total is None else total + tv
-            count += 1
-    return total / max(count, 1) if total is not None else _zero(encoding)
+    """Mean over every plane of its mean squared neighbour difference; k planes only along their spatial axis (W)."""
+    per_plane = []
+    for stack, touches_k in _stacks(encoding):
+        # a k plane (a, k) stores the spatial axis a along W, k along H
+        tv = (stack[..., :, 1:] - stack[..., :, :-1]).square().mean(dim=(1, 2, 3))
+        if not touches_k:
+            tv = tv + (stack[..., 1:, :] - stack[..., :-1, :]).square().mean(dim=(1, 2, 3))
+        per_plane.append(tv)
+    return torch.cat(per_plane).mean() if per_plane else _zero(encoding)
 
 
 def k_planes_l1(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
     """Mean |1 - plane| over the planes with a k axis (0 when the field ignores k)."""
-    terms = [(1.0 - grid.planes[i]).abs().mean() for grid in _grids(encoding) for i in grid.k_plane_indices]
-    return torch.stack(terms).mean() if terms else _zero(encoding)
+    terms = [(1.0 - stack).abs().mean(dim=(1, 2, 3)) for stack, _ in _stacks(encoding, k_only=True)]
+    return torch.cat(terms).mean() if terms else _zero(encoding)
 
 
 def k_smoothness(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
     """Mean squared second difference along the k axis (H) of the k planes."""
-    terms = []
-    for grid in _grids(encoding):
-        for i in grid.k_plane_indices:
-            p = grid.planes[i]
-            if p.shape[-2] >= 3:
-                terms.append((p[..., 2:, :] - 2 * p[..., 1:-1, :] + p[..., :-2, :]).square().mean())
-    return torch.stack(terms).mean() if terms else _zero(encoding)
+    terms = [(p[..., 2:, :] - 2 * p[..., 1:-1, :] + p[..., :-2, :]).square().mean(dim=(1, 2, 3))
+             for p, _ in _stacks(encoding, k_only=True) if p.shape[-2] >= 3]
+    return torch.cat(terms).mean() if terms else _zero(encoding)
+
+
+def _masked_mean(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean of ``values`` where ``mask``; 0 (with gradient 0) where nothing is selected.
+
+    Written with a multiply instead of boolean indexing so no host sync is needed
+    to learn how many entries there are (a training step never waits on the GPU).
+    """
+    m = mask.to(values.dtype)
+    return (values * m).sum() / m.sum().clamp(min=1.0)
 
 
 def focal_mask_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, gamma: float = 1.5) -> torch.Tensor:
     """``0.5 * (1 - exp(-CE))^gamma * CE`` of rendered logits [R, C] vs labels [R] (-1 = no label, skipped)."""
     valid = labels >= 0
-    if not bool(valid.any()):
-        return rendered_logits.sum() * 0.0
-    ce = F.cross_entropy(rendered_logits[valid].float(), labels[valid], reduction="none")
-    return (0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce).mean()
+    ce = F.cross_entropy(rendered_logits.float(), labels.clamp(min=0), reduction="none")
+    return _masked_mean(0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce, valid)
 
 
 def repulsion_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, margin: float = 10.0) -> torch.Tensor:
@@ -114,31 +125,29 @@ def repulsion_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, margin: 
     reference code, ``d`` is ONE mean over all differing pairs, taken over the
     two logit channels where their one-hot labels differ (each pair's own
     label channels), and the hinge applies to that mean: the term pushes the
-    classes apart on average instead of forcing every pair past ``K``.
+    classes apart on average instead of forcing every pair past ``K``. A batch
+    without a differing pair gives 0.
     """
     half = rendered_logits.shape[0] // 2
     a, b = rendered_logits[:half].float(), rendered_logits[half : 2 * half].float()
     la, lb = labels[:half], labels[half : 2 * half]
     differ = (la != lb) & (la >= 0) & (lb >= 0)
-    if not bool(differ.any()):
-        return rendered_logits.sum() * 0.0
-    a, b, la, lb = a[differ], b[differ], la[differ], lb[differ]
-    rows = torch.arange(a.shape[0], device=a.device)
-    dist = torch.cat([(a[rows, la] - b[rows, la]).abs(), (a[rows, lb] - b[rows, lb]).abs()]).mean()
-    return F.elu(margin - dist) + 1.0
+    ia, ib = la.clamp(min=0)[:, None], lb.clamp(min=0)[:, None]
+    pair = (a.gather(1, ia) - b.gather(1, ia)).abs()[:, 0] + (a.gather(1, ib) - b.gather(1, ib)).abs()[:, 0]
+    dist = _masked_mean(pair, differ) / 2.0  # the mean over both channels of every differing pair
+    return torch.where(differ.any(), F.elu(margin - dist) + 1.0, torch.zeros_like(dist))
 
 
 def language_loss(rendered: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
                   delta: float = 1.25) -> torch.Tensor:
     """Huber loss of rendered embeddings [R, D] vs targets [R, D] on rays with a label."""
-    if not bool(valid.any()):
-        return rendered.sum() * 0.0
-    return F.huber_loss(rendered[valid].float(), target[valid].float(), delta=delta, reduction="none").sum(-1).mean()
+    per_ray = F.huber_loss(rendered.float(), target.float(), delta=delta, reduction="none").sum(-1)
+    return _masked_mean(per_ray, valid)
 
 
 def state_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """MSE of learned states vs key-frame values; NaN targets (object not annotated) are skipped."""
     valid = torch.isfinite(target)
-    if not bool(valid.any()):
-        return predicted.sum() * 0.0
-    return (predicted[valid] - target[valid]).square().mean()
+    # the NaN targets are replaced before the difference, so their zero weight cannot meet a NaN gradient
+    diff = predicted - torch.where(valid, target, predicted.detach())
+    return _masked_mean(diff.square(), valid)

@@ -38,7 +38,7 @@ from stages.scene import InputError, atomic_path, read_scene, read_yaml_mapping,
 from .config import PRESET_DIR, load_config
 from .methods import SceneInfo, build_model
 from .methods.baselines import BASELINES
-from .trainer import Trainer
+from .trainer import PendingStep, Trainer
 
 METHOD_PRESET_DIR = PRESET_DIR / "methods"
 ALL_METHODS = ("livescene", *BASELINES)
@@ -107,7 +107,7 @@ class _ReplayableTrainer(Trainer):
         self.replay = replay
         self.fractions: list[float] = []
 
-    def train_step(self) -> dict[str, float] | None:
+    def train_step(self) -> PendingStep:
         if self.replay is not None:
             self.time_fraction = self.replay[self.step]
         self.fractions.append(float(self.time_fraction))

@@ -10,7 +10,7 @@ the run was trained with language targets.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,10 @@ from .rays import RayBundle
 from .scene_normalization import SceneNormalization, aabb_near_far
 
 States = Mapping[str, float] | Sequence[float] | np.ndarray | None
+IMAGE_OUTPUTS = ("rgb", "depth", "accumulation", "probs", "language")
+"""What ``render`` can return (language only for runs trained with language targets)."""
+MODEL_OUTPUT = {"probs": "logits"}
+"""The model output each image is made from, where the names differ."""
 
 
 class LoadedRun:
@@ -96,10 +100,13 @@ class LoadedRun:
                              "give one value per object, in this order")
         return arr
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, state: np.ndarray,
-                    time_value: float = 0.0) -> dict[str, np.ndarray]:
-        """Render world-space rays [N, 3] with one state vector; returns flat arrays."""
+                    time_value: float = 0.0, outputs: Collection[str] = IMAGE_OUTPUTS) -> dict[str, np.ndarray]:
+        """Render world-space rays [N, 3] with one state vector; returns flat arrays of the named ``outputs``."""
+        unknown = sorted(set(outputs) - set(IMAGE_OUTPUTS))
+        if unknown:
+            raise ValueError(f"unknown render outputs {unknown}; choose from {IMAGE_OUTPUTS}")
         o = torch.tensor(self.norm.points(origins.reshape(-1, 3)), dtype=torch.float32, device=self.device)
         d = torch.tensor(directions.reshape(-1, 3), dtype=torch.float32, device=self.device)
         d = d / d.norm(dim=-1, keepdim=True)
@@ -109,31 +116,39 @@ class LoadedRun:
         times = torch.full((n,), float(time_value), device=self.device)
         rays = RayBundle(o, d, nears, fars, st, times)
         chunk = self.config.train.render_chunk
+        model_outputs = [MODEL_OUTPUT.get(k, k) for k in outputs]
         parts: dict[str, list[torch.Tensor]] = {}
         for i in range(0, n, chunk):
-            out = self.model(rays.slice(i, i + chunk), step=self.step)
-            parts.setdefault("rgb", []).append(out["rgb"].clamp(0, 1))
-            parts.setdefault("depth", []).append(out["depth"] / self.norm.scale)
-            parts.setdefault("accumulation", []).append(out["accumulation"])
-            parts.setdefault("probs", []).append(torch.softmax(out["logits"], dim=-1))
+            out = self.model(rays.slice(i, i + chunk), step=self.step, outputs=model_outputs)
+            if "rgb" in out:
+                parts.setdefault("rgb", []).append(out["rgb"].clamp(0, 1))
+            if "depth" in out:
+                parts.setdefault("depth", []).append(out["depth"] / self.norm.scale)
+            if "accumulation" in out:
+                parts.setdefault("accumulation", []).append(out["accumulation"])
+            if "logits" in out:
+                parts.setdefault("probs", []).append(torch.softmax(out["logits"], dim=-1))
             if "language" in out:
                 parts.setdefault("language", []).append(F.normalize(out["language"], dim=-1))
         return {k: torch.cat(v).float().cpu().numpy() for k, v in parts.items()}
 
-    def render(self, camera: Camera, c2w: np.ndarray, states: States = None,
-               frame_index: int | None = None) -> dict[str, np.ndarray]:
-        """Render a full image of ``camera`` at pose ``c2w`` (dataset world, OpenGL) with ``states``."""
+    def render(self, camera: Camera, c2w: np.ndarray, states: States = None, frame_index: int | None = None,
+               outputs: Collection[str] = IMAGE_OUTPUTS) -> dict[str, np.ndarray]:
+        """Render a full image of ``camera`` at pose ``c2w`` (dataset world, OpenGL) with ``states``.
+
+        ``outputs`` picks what to render (default all); ``("rgb",)`` is the fast path of plain images.
+        """
         state = self.state_vector(states, frame_index)
         origins, dirs = generate_rays(camera, np.asarray(c2w, dtype=np.float64))
         t = self.frame_time(frame_index) if frame_index is not None else 0.0
-        flat = self.render_rays(origins, dirs, state, t)
+        flat = self.render_rays(origins, dirs, state, t, outputs)
         h, w = camera.height, camera.width
         return {k: v.reshape(h, w, *v.shape[1:]) for k, v in flat.items()}
 
     def relevancy(self, camera: Camera, c2w: np.ndarray, states: States, query_embedding: np.ndarray,
                   frame_index: int | None = None) -> np.ndarray:
         """Cosine similarity [H, W] of the rendered language embedding with a query embedding."""
-        out = self.render(camera, c2w, states, frame_index)
+        out = self.render(camera, c2w, states, frame_index, outputs=("language",))
         if "language" not in out:
             raise InputError(self.run_dir, "this run renders no language embedding",
                              "train with --language-targets targets.npz")

@@ -46,6 +46,22 @@ class TrainingDiverged(RuntimeError):
     """Too many consecutive steps with a non-finite loss or gradient."""
 
 
+@dataclasses.dataclass
+class PendingStep:
+    """A queued training step: its loss terms and finite checks, still on the device."""
+
+    step: int
+    names: list[str]
+    values: torch.Tensor
+    """[terms + 1]: every weighted loss term, then their sum."""
+    terms_ok: torch.Tensor
+    grad_names: list[str]
+    grads_ok: torch.Tensor
+    """[parameters with a gradient]: whether each gradient is finite."""
+    wall_s: float
+    lr: float
+
+
 def resolve_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -73,6 +89,14 @@ def autocast_dtype(setting: str, device: torch.device) -> torch.dtype | None:
     if setting == "fp16":
         return torch.float16
     raise InputError("train.mixed_precision", f"unknown value {setting!r}", "use auto, bf16, fp16 or off")
+
+
+def compile_fields(model: torch.nn.Module) -> None:
+    """Compile every field's forward in place (state_dict keys unchanged); a graph break is an error."""
+    for name in ("field", "probability_field"):
+        getattr(model, name).compile(fullgraph=True, dynamic=True)
+    for proposal in getattr(model, "proposal_fields", []):
+        proposal.compile(fullgraph=True, dynamic=True)
 
 
 def seed_everything(seed: int) -> None:
@@ -166,10 +190,15 @@ class Trainer:
             raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
                              "annotate key frames, or set --set model.state.key_frame_every=N")
         self.model = build_model(cfg.method, cfg.model, self.info).to(self.device)
+        if cfg.train.compile:
+            compile_fields(self.model)
         if self.language is not None:
             self.language = self.language.to(self.device)
-        params = [p for p in self.model.parameters() if p.requires_grad]
-        self.optimizer = torch.optim.Adam(params, lr=cfg.train.lr, eps=cfg.train.adam_eps)
+        self._named_params = [(n, p) for n, p in self.model.named_parameters() if p.requires_grad]
+        # fused Adam takes the step's finite check as a device tensor (found_inf) and skips the update on the
+        # device: no host sync decides whether a step counts
+        self.optimizer = torch.optim.Adam([p for _, p in self._named_params], lr=cfg.train.lr,
+                                          eps=cfg.train.adam_eps, fused=True)
         t = cfg.train
         self.time_fraction = 0.0  # share of train.max_seconds spent (0 without a budget); drives the decay too
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
@@ -184,6 +213,8 @@ class Trainer:
         self.step = 0
         self.wall_before = 0.0
         self.nonfinite_streak = 0
+        self._pending: list[PendingStep] = []
+        self._t0 = time.perf_counter()
         self.log_rows: list[dict[str, Any]] = []
         self.last_eval_miou: float | None = None
 
@@ -254,8 +285,15 @@ class Trainer:
             return torch.autocast(device_type=self.device.type, enabled=False)
         return torch.autocast(device_type=self.device.type, dtype=self.amp_dtype)
 
-    def train_step(self) -> dict[str, float] | None:
-        """One optimisation step; None when it was skipped for a non-finite loss or gradient."""
+    def train_step(self) -> PendingStep:
+        """One optimisation step, queued without waiting for the device.
+
+        Finite checks of every loss term and every gradient run on the device;
+        a step with a non-finite one is skipped there (fused Adam's ``found_inf``
+        leaves weights, moments and step count as they were). Nothing is read
+        back to the host: ``flush_steps`` reads every queued step at once, names
+        the skipped ones and keeps the streak (docs/model.md).
+        """
         self.model.train()
         batch = self.train_rays.sample(self.config.train.batch_rays, self.ray_generator)
         with self._autocast():
@@ -263,40 +301,66 @@ class Trainer:
             terms = self.model.loss_dict(out, batch, self.step, self.language)
         names = list(terms)
         values = torch.stack([terms[n].float() for n in names])
-        finite = torch.isfinite(values)
+        terms_ok = torch.isfinite(values)
         self.optimizer.zero_grad(set_to_none=True)
-        if not bool(finite.all()):
-            bad = [n for n, ok in zip(names, finite.tolist(), strict=True) if not ok]
-            return self._skip(f"non-finite loss term(s) {bad}")
         loss = values.sum()
         if self.scaler is not None:
             self.scaler.scale(loss).backward()
             self.scaler.unscale_(self.optimizer)
         else:
             loss.backward()
-        named = [(n, p.grad) for n, p in self.model.named_parameters() if p.grad is not None]
-        if named and not bool(torch.isfinite(torch.stack([g.float().norm() for _, g in named])).all()):
-            bad = [n for n, g in named if not bool(torch.isfinite(g).all())]
-            return self._skip(f"non-finite gradient in {', '.join(bad[:3])}" + (" ..." if len(bad) > 3 else ""))
+        with_grad = [(n, p) for n, p in self._named_params if p.grad is not None]
+        grads_ok = torch.isfinite(torch.stack(torch._foreach_norm([p.grad for _, p in with_grad]))) if with_grad \
+            else terms_ok[:0]
+        bad = ~(terms_ok.all() & grads_ok.all())
+        self.optimizer.found_inf = bad.float()
+        self.optimizer.step()
         if self.scaler is not None:
-            self.scaler.step(self.optimizer)
-            self.scaler.update()
-        else:
-            self.optimizer.step()
+            self.scaler.update()  # lowers the loss scale after an overflow (recorded by unscale_)
         self.scheduler.step()
-        self.nonfinite_streak = 0
-        result = {n: float(v) for n, v in zip(names, values.detach().cpu().tolist(), strict=True)}
-        result["loss"] = float(loss.detach())
-        return result
+        pending = PendingStep(self.step, names, torch.cat([values.detach(), loss.detach()[None]]), terms_ok,
+                              [n for n, _ in with_grad], grads_ok, self.wall_before + time.perf_counter() - self._t0,
+                              float(self.scheduler.get_last_lr()[0]))
+        self._pending.append(pending)
+        return pending
 
-    def _skip(self, why: str) -> None:
-        self.optimizer.zero_grad(set_to_none=True)
-        self.nonfinite_streak += 1
-        tqdm.write(f"step {self.step}: skipped ({why}); {self.nonfinite_streak} in a row", file=sys.stderr)
-        if self.nonfinite_streak >= self.config.train.max_nonfinite:
-            raise TrainingDiverged(f"{self.nonfinite_streak} consecutive steps with {why}; stopped at step "
-                                   f"{self.step} without saving (the last checkpoint is the last finite state)")
-        return None
+    def flush_steps(self) -> list[dict[str, float] | None]:
+        """Read every queued step from the device (one sync); their loss terms, or None for a skipped step.
+
+        Skipped steps are named on stderr with the terms or parameters that were
+        not finite; ``train.max_nonfinite`` skipped steps in a row stop training.
+        """
+        pending, self._pending = self._pending, []
+        if not pending:
+            return []
+        flags = torch.cat([torch.cat([p.terms_ok, p.grads_ok]) for p in pending]).cpu().tolist()
+        values = torch.stack([p.values for p in pending]).cpu().tolist() if \
+            len({len(p.values) for p in pending}) == 1 else [p.values.cpu().tolist() for p in pending]
+        results: list[dict[str, float] | None] = []
+        at = 0
+        for p, vals in zip(pending, values, strict=True):
+            n_t, n_g = len(p.names), len(p.grad_names)
+            terms_ok, grads_ok = flags[at : at + n_t], flags[at + n_t : at + n_t + n_g]
+            at += n_t + n_g
+            if all(terms_ok) and all(grads_ok):
+                self.nonfinite_streak = 0
+                result = dict(zip(p.names, vals[:-1], strict=True))
+                result["loss"] = vals[-1]
+                results.append(result)
+                self.log_rows.append({"wall_s": round(p.wall_s, 3), "step": p.step + 1, "lr": p.lr,
+                                      "eval_psnr": None, "eval_miou": None, **result})
+                continue
+            bad_terms = [n for n, ok in zip(p.names, terms_ok, strict=True) if not ok]
+            bad_grads = [n for n, ok in zip(p.grad_names, grads_ok, strict=True) if not ok]
+            why = (f"non-finite loss term(s) {bad_terms}" if bad_terms else
+                   f"non-finite gradient in {', '.join(bad_grads[:3])}" + (" ..." if len(bad_grads) > 3 else ""))
+            self.nonfinite_streak += 1
+            results.append(None)
+            tqdm.write(f"step {p.step}: skipped ({why}); {self.nonfinite_streak} in a row", file=sys.stderr)
+            if self.nonfinite_streak >= self.config.train.max_nonfinite:
+                raise TrainingDiverged(f"{self.nonfinite_streak} consecutive steps with {why}; stopped at step "
+                                       f"{p.step} without saving (the last checkpoint is the last finite state)")
+        return results
 
     @torch.no_grad()
     def evaluate(self) -> float:
@@ -310,7 +374,7 @@ class Trainer:
         for i in range(0, len(self.eval_index), chunk):
             batch = self.eval_rays.batch(self.eval_index[i : i + chunk])
             with self._autocast():
-                out = self.model(batch.rays, step=self.step)
+                out = self.model(batch.rays, step=self.step, outputs=("rgb", "logits"))
             err += float((out["rgb"].float().clamp(0, 1) - batch.rgb).square().sum())
             n += batch.rgb.numel()
             if alpha and "logits" in out:
@@ -359,14 +423,30 @@ class Trainer:
             old_handler = None
         if self.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(self.device)
-        t0 = time.perf_counter()
+        t0 = self._t0 = time.perf_counter()
         max_seconds = cfg.train.max_seconds
         bar = tqdm(total=cfg.train.max_steps, initial=self.step, unit="step", disable=not self.progress,
                    dynamic_ncols=True, desc=f"train {cfg.method}")
         last_psnr: float | None = None
-        window_t, window_steps = time.perf_counter(), 0
-        rays_per_s = 0.0
+        window = [time.perf_counter(), self.step]
         status = "completed"
+
+        def read_back() -> None:
+            """The one sync of a logging interval: queued steps -> log rows, skip messages, progress bar."""
+            results = self.flush_steps()
+            now = time.perf_counter()
+            rays_per_s = (self.step - window[1]) * cfg.train.batch_rays / max(now - window[0], 1e-9)
+            window[:] = [now, self.step]
+            for row in self.log_rows[len(self.log_rows) - sum(r is not None for r in results):]:
+                row["rays_per_s"] = round(rays_per_s, 1)
+            done = [r for r in results if r is not None]
+            post = {"loss": f"{done[-1]['loss']:.4f}" if done else "skipped", "rays/s": f"{rays_per_s:.0f}"}
+            if last_psnr is not None:
+                post["psnr"] = f"{last_psnr:.2f}"
+            if max_seconds > 0:
+                post["left_s"] = f"{max(max_seconds - (self.wall_before + now - t0), 0):.0f}"
+            bar.set_postfix(post, refresh=False)
+
         try:
             while self.step < cfg.train.max_steps:
                 elapsed = self.wall_before + time.perf_counter() - t0
@@ -377,36 +457,24 @@ class Trainer:
                     status = self._stop_reason
                     break
                 self.time_fraction = elapsed / max_seconds if max_seconds > 0 else 0.0
-                result = self.train_step()
+                self.train_step()
                 self.step += 1
-                window_steps += 1
-                now = time.perf_counter()
-                if now - window_t > 2.0:
-                    rays_per_s = window_steps * cfg.train.batch_rays / (now - window_t)
-                    window_t, window_steps = now, 0
-                eval_psnr = None
-                if cfg.train.eval_every > 0 and (self.step % cfg.train.eval_every == 0
-                                                 or self.step == cfg.train.max_steps):
-                    eval_psnr = last_psnr = self.evaluate()
-                if result is not None:
-                    row = {"wall_s": round(self.wall_before + time.perf_counter() - t0, 3), "step": self.step,
-                           "lr": self.scheduler.get_last_lr()[0], "eval_psnr": eval_psnr,
-                           "eval_miou": self.last_eval_miou if eval_psnr is not None else None,
-                           "rays_per_s": round(rays_per_s, 1), **result}
-                    self.log_rows.append(row)
-                    if eval_psnr is not None:  # the log on disk follows the run, for plots of error vs time
-                        self._write_log()
-                    if self.step % 10 == 0 or eval_psnr is not None:
-                        post = {"loss": f"{result['loss']:.4f}", "rays/s": f"{rays_per_s:.0f}"}
-                        if last_psnr is not None:
-                            post["psnr"] = f"{last_psnr:.2f}"
-                        if max_seconds > 0:
-                            post["left_s"] = f"{max(max_seconds - elapsed, 0):.0f}"
-                        bar.set_postfix(post, refresh=False)
                 bar.update(1)
-                if cfg.train.checkpoint_every > 0 and self.step % cfg.train.checkpoint_every == 0:
+                is_eval = cfg.train.eval_every > 0 and (self.step % cfg.train.eval_every == 0
+                                                        or self.step == cfg.train.max_steps)
+                is_checkpoint = cfg.train.checkpoint_every > 0 and self.step % cfg.train.checkpoint_every == 0
+                if is_eval or is_checkpoint or self.step % max(cfg.train.log_every, 1) == 0:
+                    read_back()
+                if is_eval:
+                    last_psnr = self.evaluate()
+                    if self.log_rows and int(self.log_rows[-1]["step"]) == self.step:
+                        self.log_rows[-1]["eval_psnr"] = last_psnr
+                        self.log_rows[-1]["eval_miou"] = self.last_eval_miou
+                    self._write_log()  # the log on disk follows the run, for plots of error vs steps and time
+                if is_checkpoint:
                     self.save_checkpoint(self.wall_before + time.perf_counter() - t0)
                     self._write_log()
+            read_back()
         finally:
             bar.close()
             if old_handler is not None:

@@ -74,7 +74,8 @@ def train_briefly(data: Path, out: Path, *, steps: int, overrides: list[str] | N
     trainer = make_trainer(data, out, steps=steps, overrides=overrides, seed=seed, device=device)
     run = BriefRun(trainer)
     for _ in range(steps):
-        result = trainer.train_step()
+        trainer.train_step()
+        result = trainer.flush_steps()[-1]
         trainer.step += 1
         if result is None:
             run.skipped += 1

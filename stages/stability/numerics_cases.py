@@ -141,8 +141,8 @@ def objects_touching_box(ctx: CaseContext) -> Outcome:
     grads = [p.grad for p in [*field.parameters(), *prob.parameters()] if p.grad is not None]
     require(all(bool(torch.isfinite(g).all()) for g in grads), "gradients at the box faces are not finite")
     # the border vertices of the planes must receive gradient (a sample on the face reaches the last grid vertex)
-    plane = field.encoding.grids[0].planes[0]
-    border = float(plane.grad[..., -1].abs().sum() + plane.grad[..., 0].abs().sum())
+    plane = field.encoding.grids[0].plane_groups[0]  # the stacked spatial planes; xy first
+    border = float(plane.grad[0, ..., -1].abs().sum() + plane.grad[0, ..., 0].abs().sum())
     require(border > 0, "no gradient reaches the border vertices of the xy plane from samples on the box faces")
     values = {"probe_points": len(coords), "border_grad": border}
     metric = f"{len(coords)} face/corner samples finite, border-vertex gradient {border:.2g}"

@@ -77,5 +77,5 @@ def test_rgb_gradient_reaches_learned_states_through_k(tiny_dataset, tmp_path, t
     torch.nn.functional.mse_loss(out["rgb"], batch.rgb).backward()
     grads = [p.grad for p in model.state_field.parameters()]
     assert all(g is not None for g in grads) and any(float(g.abs().sum()) > 0 for g in grads)
-    spatial = model.field.encoding.grids[0].planes[0]  # spatial planes still learn from rgb
+    spatial = model.field.encoding.grids[0].plane_groups[0]  # spatial planes (xy, xz, yz) still learn from rgb
     assert spatial.grad is not None and float(spatial.grad.abs().sum()) > 0

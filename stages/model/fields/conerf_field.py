@@ -22,7 +22,7 @@ import torch
 from torch import nn
 
 from ..config import ConerfConfig, RadianceFieldConfig
-from ..encodings import MultiScaleKPlanes, SHEncoding
+from ..encodings import MultiScaleKPlanes, PlaneGrids, SHEncoding
 from ..mlp import mlp
 from .activations import trunc_exp
 
@@ -51,16 +51,17 @@ class ConerfField(nn.Module):
         self.color_mlp = mlp(self.direction_encoding.out_dim + config.geo_feat_dim, config.color_hidden,
                              config.color_layers, 3)
 
-    def density(self, coords: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def density(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """-> density [N] (float32), geometry features [N, geo_feat_dim]."""
-        spatial = self.encoding(coords[:, :3])
+        spatial = self.encoding(coords[:, :3], cache)
         attrs = attribute_encoding(coords[:, 3:].to(spatial.dtype), self.conerf.attribute_frequencies)
         h = self.density_mlp(torch.cat([spatial, attrs], dim=-1))
         raw, geo = h[:, 0], h[:, 1:]
         return trunc_exp(raw + self.config.density_bias, self.config.density_exp_clamp), geo
 
-    def forward(self, coords: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        sigma, geo = self.density(coords)
+    def forward(self, coords: torch.Tensor, directions: torch.Tensor,
+                cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        sigma, geo = self.density(coords, cache)
         d = self.direction_encoding(directions).to(geo.dtype)
         rgb = torch.sigmoid(self.color_mlp(torch.cat([d, geo], dim=-1)).float())
         return sigma, rgb

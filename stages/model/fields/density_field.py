@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from ..encodings import KPlanesEncoding
+from ..encodings import KPlanesEncoding, PlaneGrids
 from ..mlp import mlp
 from .activations import trunc_exp
 
@@ -24,7 +24,7 @@ class DensityField(nn.Module):
         self.density_bias = density_bias
         self.exp_clamp = exp_clamp
 
-    def forward(self, coords: torch.Tensor) -> torch.Tensor:
+    def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, D] in [-1, 1] -> density [N] (float32)."""
-        raw = self.mlp(self.encoding(coords))[:, 0]
+        raw = self.mlp(self.encoding(coords, cache))[:, 0]
         return trunc_exp(raw + self.density_bias, self.exp_clamp)

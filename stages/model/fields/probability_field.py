@@ -11,10 +11,11 @@ gradient, so the logits are trained by the mask losses only.
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from ..config import ProbabilityConfig
-from ..encodings import KPlanesEncoding
+from ..encodings import KPlanesEncoding, PlaneGrids
 from ..mlp import mlp
 
 
@@ -29,9 +30,22 @@ class ProbabilityField(nn.Module):
         self.encoding = KPlanesEncoding([r, r, r], config.channels, None, 3, config.init_range)
         self.decoder = mlp(config.channels + n_objects, config.hidden, 1, n_objects + 1)
 
-    def forward(self, positions: torch.Tensor, states: torch.Tensor) -> torch.Tensor:
-        features = torch.sigmoid(self.encoding(positions))
-        return self.decoder(torch.cat([features, states.to(features.dtype)], dim=-1)).float()
+    def forward(self, positions: torch.Tensor, states: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
+        """``positions`` [N, 3] and ``states`` [N, alpha], or [R, alpha] per ray with N = R x samples -> [N, alpha + 1].
+
+        The decoder's first layer is applied to the features and the states
+        separately (the same sum as on their concatenation), so a state vector
+        per ray is never copied out to every sample.
+        """
+        features = torch.sigmoid(self.encoding(positions, cache))
+        first, rest = self.decoder[0], self.decoder[1:]
+        c = features.shape[-1]
+        h = F.linear(features, first.weight[:, :c], first.bias)
+        if self.n_objects > 0:
+            hs = F.linear(states.to(h.dtype), first.weight[:, c:])
+            n, r = h.shape[0], hs.shape[0]
+            h = h + hs if r == n else (h.view(r, n // r, -1) + hs[:, None, :]).view(n, -1)
+        return rest(h).float()
 
     def project(self, logits: torch.Tensor, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The k coordinate of every sample: ``kappa_u`` with ``u`` = argmax over the object logits.

@@ -8,7 +8,7 @@ import torch
 from torch import nn
 
 from ..config import RadianceFieldConfig
-from ..encodings import MultiScaleKPlanes, SHEncoding
+from ..encodings import MultiScaleKPlanes, PlaneGrids, SHEncoding
 from ..mlp import mlp
 from .activations import trunc_exp
 
@@ -33,16 +33,17 @@ class RadianceField(nn.Module):
         self.color_mlp = mlp(self.direction_encoding.out_dim + config.geo_feat_dim, config.color_hidden,
                              config.color_layers, 3)
 
-    def density(self, coords: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def density(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """``coords`` [N, D] in [-1, 1] -> density [N] (float32), geometry features [N, geo_feat_dim]."""
-        h = self.density_mlp(self.encoding(coords))
+        h = self.density_mlp(self.encoding(coords, cache))
         raw, geo = h[:, 0], h[:, 1:]
         sigma = trunc_exp(raw + self.config.density_bias, self.config.density_exp_clamp)
         return sigma, geo
 
-    def forward(self, coords: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, coords: torch.Tensor, directions: torch.Tensor,
+                cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """-> density [N], rgb [N, 3] in (0, 1)."""
-        sigma, geo = self.density(coords)
+        sigma, geo = self.density(coords, cache)
         d = self.direction_encoding(directions).to(geo.dtype)
         rgb = torch.sigmoid(self.color_mlp(torch.cat([d, geo], dim=-1)).float())
         return sigma, rgb

@@ -9,6 +9,7 @@ same sampler, trainer and losses a different field.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import torch
@@ -16,12 +17,16 @@ from torch import nn
 
 from .. import losses as L
 from ..config import ModelConfig
+from ..encodings import PlaneGrids
 from ..fields import DensityField, LanguageTable, ProbabilityField, RadianceField, StateField
 from ..language_targets import LanguageTargets
 from ..ray_dataset import RayBatch
 from ..ray_samplers import ProposalSchedule, RaySamples, pdf_samples, uniform_samples
 from ..rays import RayBundle
 from ..renderers import render_accumulation, render_depth, render_features, render_rgb, render_weights
+
+RENDER_OUTPUTS = ("rgb", "depth", "accumulation", "logits", "language")
+"""What ``forward`` can render; training renders all of them (language only with a table)."""
 
 
 @dataclass
@@ -99,7 +104,7 @@ class LiveSceneModel(nn.Module):
 
     # -- rendering ------------------------------------------------------------------------------------------
     def _level(self, rays: RayBundle, samples: RaySamples, states: torch.Tensor, final: bool,
-               grad_density: bool) -> dict[str, torch.Tensor]:
+               grad_density: bool, want_rgb: bool = True) -> dict[str, torch.Tensor]:
         n_rays, n_samp = samples.bins.shape[0], samples.n_samples
         mids = samples.mids
         pos = (rays.origins[:, None, :] + rays.directions[:, None, :] * mids[..., None]).reshape(-1, 3)
@@ -107,33 +112,61 @@ class LiveSceneModel(nn.Module):
         st = states[:, None, :].expand(n_rays, n_samp, states.shape[-1]).reshape(-1, states.shape[-1])
         times = rays.times if rays.times is not None else torch.zeros(n_rays, device=pos.device)
         t = times[:, None].expand(n_rays, n_samp).reshape(-1)
+        # one set of plane grids per level: the spatial xy/xz/yz grid serves the probability tri-plane and every
+        # scale of the density field, the k grid every scale
+        grids: PlaneGrids = {}
         # the tri-plane is sampled at box-normalised positions (the reference code forgets to normalise)
-        logits = self.probability_field(pos, st)
+        logits = self.probability_field(pos, states, grids)
         coords, _, _ = self.coordinates(pos, st, logits, t)
         out: dict[str, torch.Tensor] = {"logits": logits.view(n_rays, n_samp, -1)}
         if final:
-            dirs = rays.directions[:, None, :].expand(n_rays, n_samp, 3).reshape(-1, 3)
-            sigma, rgb = self.field(coords, dirs)
-            out["rgb"] = rgb.view(n_rays, n_samp, 3)
-            if self.language_table is not None:
-                full_region = logits.detach().argmax(dim=-1)  # background samples take the background entry
-                if self.config.language.interpolate_by == "frame" or st.shape[1] == 0:
-                    value = t
-                else:
-                    value = torch.gather(st, 1, full_region.clamp(max=st.shape[1] - 1)[:, None])[:, 0]
-                out["language"] = self.language_table(full_region, value).view(n_rays, n_samp, -1)
+            if want_rgb:
+                dirs = rays.directions[:, None, :].expand(n_rays, n_samp, 3).reshape(-1, 3)
+                sigma, rgb = self.field(coords, dirs, grids)
+                out["rgb"] = rgb.view(n_rays, n_samp, 3)
+            else:
+                sigma, _ = self.field.density(coords, grids)
         else:
             level = len(self._levels_done)
             with torch.set_grad_enabled(grad_density and torch.is_grad_enabled()):
-                sigma = self.proposal_fields[level](coords)
+                sigma = self.proposal_fields[level](coords, grids)
         out["density"] = sigma.view(n_rays, n_samp)
         out["weights"] = render_weights(out["density"], samples.deltas)
         return out
 
-    def forward(self, rays: RayBundle, step: int = 0, generator: torch.Generator | None = None) -> dict:
-        """Render rays. In training mode the result holds what ``loss_dict`` needs; in eval, images only."""
+    def render_language(self, weights: torch.Tensor, logits: torch.Tensor, states: torch.Tensor,
+                        times: torch.Tensor | None) -> torch.Tensor:
+        """Rendered language embedding [R, D] of the final level (``LanguageTable.render``).
+
+        Every sample takes the entry of its region (argmax over all alpha + 1
+        logits, so background samples take the background entry) at the state of
+        that region's object, or at the frame time; the weights are detached, as
+        the language loss trains the table only.
+        """
+        assert self.language_table is not None
+        alpha = self.info.n_objects
+        region = logits.detach().argmax(dim=-1)  # [R, S]
+        region_weights = torch.zeros(weights.shape[0], alpha + 1, device=weights.device, dtype=torch.float32)
+        region_weights = region_weights.scatter_add(1, region, weights.detach().float())
+        if self.config.language.interpolate_by == "frame" or alpha == 0:
+            t = times if times is not None else torch.zeros(weights.shape[0], device=weights.device)
+            values = t[:, None].float().expand(-1, alpha + 1)
+        else:
+            values = torch.cat([states.float(), torch.zeros_like(states[:, :1]).float()], dim=1)
+        return self.language_table.render(region_weights, values)
+
+    def forward(self, rays: RayBundle, step: int = 0, generator: torch.Generator | None = None,
+                outputs: Collection[str] = RENDER_OUTPUTS) -> dict:
+        """Render rays. In training mode the result holds what ``loss_dict`` needs; in eval, images only.
+
+        ``outputs`` (eval) names what to render of ``RENDER_OUTPUTS``: a plain
+        image needs only ``("rgb",)``, which skips the language table and the
+        rendered logits (the probability field still runs: it places k).
+        """
         cfg = self.config.sampling
         training = self.training
+        if training:
+            outputs = RENDER_OUTPUTS
         states = self.ray_states(rays)
         grad_prop = training and self.schedule.updates_proposals(step)
         anneal = self.schedule.anneal(step)
@@ -148,24 +181,25 @@ class LiveSceneModel(nn.Module):
             w = lvl["weights"].detach()
             samples = pdf_samples(samples, w.clamp(min=0) ** anneal if anneal != 1.0 else w, n_next, training,
                                   cfg.single_jitter, cfg.histogram_padding, generator)
-        final = self._level(rays, samples, states, final=True, grad_density=True)
+        final = self._level(rays, samples, states, final=True, grad_density=True, want_rgb="rgb" in outputs)
         levels, self._levels_done = self._levels_done, []
         w = final["weights"]
-        logits_final = render_features(w.detach(), final["logits"])
-        out: dict = {
-            "rgb": render_rgb(w, final["rgb"], self.background),
-            "depth": render_depth(w, samples.mids, rays.nears, rays.fars),
-            "accumulation": render_accumulation(w),
-            "logits": logits_final,
-            "states": states,
-        }
-        if "language" in final:
-            out["language"] = render_features(w.detach(), final["language"])
+        out: dict = {"states": states}
+        if "rgb" in outputs:
+            out["rgb"] = render_rgb(w, final["rgb"], self.background)
+        if "depth" in outputs:
+            out["depth"] = render_depth(w, samples.mids, rays.nears, rays.fars)
+        if "accumulation" in outputs:
+            out["accumulation"] = render_accumulation(w)
+        if "logits" in outputs:
+            out["logits"] = render_features(w.detach(), final["logits"])
+        if "language" in outputs and self.language_table is not None:
+            out["language"] = self.render_language(w, final["logits"], states, rays.times)
         if training:
             out["proposal"] = [(s, lv["weights"]) for s, lv in levels]
             out["final"] = (samples, w)
             out["level_logits"] = [render_features(lv["weights"].detach(), lv["logits"]) for _, lv in levels]
-            out["level_logits"].append(logits_final)
+            out["level_logits"].append(out["logits"])
         return out
 
     # -- losses ---------------------------------------------------------------------------------------------

@@ -1,0 +1,157 @@
+"""Training throughput of every method on the demo capture, with and without the language table (issue 16).
+
+For each method and language setting, a fresh subprocess builds the shared ``Trainer`` on the demo
+dataset (generated once into ``--work``) and runs real training steps (ray batch, every level, every
+loss term, backward, finite checks, Adam). It prints one JSON line per configuration and a table:
+
+- ``step_ms``: median wall time of one step (CUDA: synchronised around each step);
+- ``rays_per_s``: batch rays / median step time;
+- ``ops``: aten ops dispatched by one step, forward and backward;
+- ``syncs``: host-device synchronisations of one step that is not a logging step
+  (``.item()``, ``bool(t)``, ``float(t)``, ``.tolist()``, ...);
+- ``peak_mib``: CUDA max_memory_allocated, or the subprocess's max RSS on the CPU;
+- ``load``: the 1-minute load average before and after (figures on a busy machine are pessimistic).
+
+CPU (the default: cpu-demo, 2 threads)::
+
+    .venv/bin/python benchmarks/train_throughput.py
+
+CUDA, paper settings::
+
+    .venv/bin/python benchmarks/train_throughput.py --preset gpu-paper --device cuda --rays 4096
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from demo_dataset import ROOT, cached_demo_dataset
+
+METHODS = ["livescene", "mk-planes", "conerf"]
+
+
+def language_targets(work: Path, dataset: Path) -> Path:
+    out = work / "targets.npz"
+    if not out.is_file():
+        env = dict(os.environ, HF_HUB_OFFLINE="1")
+        subprocess.run([sys.executable, "-m", "stages.language", "targets", "--data", str(dataset), "--out",
+                        str(out)], check=True, env=env, cwd=ROOT, stdout=subprocess.DEVNULL)
+    return out
+
+
+def measure_one(args: argparse.Namespace) -> dict:
+    """Runs in the child process: one method, one language setting."""
+    import torch
+
+    from stages.model import load_config
+    from stages.model.step_counters import count_host_syncs, count_torch_ops
+    from stages.model.trainer import Trainer
+
+    overrides = [f"train.threads={args.threads}", "train.eval_every=0", "train.checkpoint_every=0",
+                 f"train.max_steps={args.warmup + args.steps + 10}", *args.overrides]
+    if args.rays:
+        overrides.append(f"train.batch_rays={args.rays}")
+    cfg = load_config(args.preset, overrides, method=args.method, data=str(args.dataset),
+                      language_targets=str(args.targets) if args.language else "")
+    with tempfile.TemporaryDirectory() as out:
+        trainer = Trainer(cfg, out, device=args.device, progress=False)
+        device = trainer.device
+        cuda = device.type == "cuda"
+
+        def step() -> None:
+            trainer.train_step()
+            trainer.step += 1
+
+        for _ in range(args.warmup):
+            step()
+        if cuda:
+            torch.cuda.synchronize(device)
+            torch.cuda.reset_peak_memory_stats(device)
+        times = []
+        for _ in range(args.steps):
+            t0 = time.perf_counter()
+            step()
+            if cuda:
+                torch.cuda.synchronize(device)
+            times.append(time.perf_counter() - t0)
+        with count_host_syncs() as syncs:
+            step()
+        with count_torch_ops() as ops:
+            step()
+    step_s = sorted(times)[len(times) // 2]
+    if cuda:
+        peak, kind = torch.cuda.max_memory_allocated(device) / 2**20, "cuda max_memory_allocated"
+    else:
+        peak, kind = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "process max RSS"
+    return {
+        "method": args.method, "language": args.language, "preset": args.preset, "device": str(device),
+        "threads": torch.get_num_threads(), "rays": cfg.train.batch_rays,
+        "step_ms": round(step_s * 1000, 1), "rays_per_s": round(cfg.train.batch_rays / step_s),
+        "ops": int(sum(ops.values())), "syncs": int(sum(syncs.values())), "sync_calls": dict(syncs),
+        "peak_mib": round(peak, 1), "peak_kind": kind,
+    }
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--methods", nargs="+", default=METHODS)
+    p.add_argument("--preset", default="cpu-demo")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
+    p.add_argument("--steps", type=int, default=60, help="timed steps (the median is reported)")
+    p.add_argument("--warmup", type=int, default=10)
+    p.add_argument("--language", choices=["both", "on", "off"], default="both")
+    p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
+    p.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "livescene-bench-demo")
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--method", help=argparse.SUPPRESS)
+    p.add_argument("--dataset", type=Path, help=argparse.SUPPRESS)
+    p.add_argument("--targets", type=Path, help=argparse.SUPPRESS)
+    p.add_argument("--with-language", dest="with_language", action="store_true", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        args.language = args.with_language
+        print(json.dumps(measure_one(args)), flush=True)
+        return 0
+    args.work.mkdir(parents=True, exist_ok=True)
+    _, dataset = cached_demo_dataset(args.work)
+    targets = language_targets(args.work, dataset)
+    settings = {"both": [False, True], "on": [True], "off": [False]}[args.language]
+    rows = []
+    for method in args.methods:
+        for lang in settings:
+            load0 = os.getloadavg()[0]
+            cmd = [sys.executable, __file__, "--child", "--method", method, "--dataset", str(dataset), "--targets",
+                   str(targets), "--preset", args.preset, "--device", args.device, "--threads", str(args.threads),
+                   "--rays", str(args.rays), "--steps", str(args.steps), "--warmup", str(args.warmup)]
+            cmd += ["--with-language"] if lang else []
+            for o in args.overrides:
+                cmd += ["--set", o]
+            out = subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=ROOT).stdout
+            row = json.loads(out.strip().splitlines()[-1])
+            row["load_before_after"] = [round(load0, 2), round(os.getloadavg()[0], 2)]
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+    head = rows[0]
+    print(f"\n{head['device']}, {head['threads']} threads, {head['rays']} rays per step, preset {args.preset}\n")
+    print("| method | language | step ms | rays/s | ops/step | host syncs/step | peak MiB | load |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        lang = "on" if r["language"] else "off"
+        load = "-".join(str(v) for v in r["load_before_after"])
+        print(f"| {r['method']} | {lang} | {r['step_ms']} | {r['rays_per_s']} | {r['ops']} | {r['syncs']} | "
+              f"{r['peak_mib']} | {load} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
