@@ -15,7 +15,8 @@ def test_tiny_scene_end_to_end(workflow_copy):
     wf = workflow_copy
     wf.write_scenes([{"scene": "tiny", "source": "synthetic", "path": "config/captures/tiny.yaml",
                       "poses": "estimate", "truth": "yes", "methods": "livescene"}])
-    config = wf.write_config(train={"max_seconds": 6}, evaluate={"max_views": 1, "unseen_views": 1},
+    config = wf.write_config(train={"steps": 40, "max_seconds": 0, "eval_every": 20},
+                             evaluate={"max_views": 1, "unseen_views": 1},
                              report={"sweep_steps": 2, "sweep_scale": 0.5, "grid_views": 1},
                              commands=["close everything"], stability={"run": False})
     run = wf.snakemake("--cores", "2", "--configfile", str(config), timeout=900)  # the default target

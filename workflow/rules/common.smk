@@ -329,8 +329,6 @@ def train_args(wildcards, input):
     # Without key frames a scene has no per-frame states to give: LiveScene learns them.
     if not carries(wildcards.scene, "key_frames"):
         args.append("--state-mode learned")
-    if config["train"].get("max_steps"):
-        args.append(f"--max-steps {config['train']['max_steps']}")
     return " ".join(args)
 
 
