@@ -91,7 +91,9 @@ class KPlanesEncoding(nn.Module):
                 nn.init.ones_(stack)
             else:
                 nn.init.uniform_(stack, float(init_range[0]), float(init_range[1]))
-            self.plane_groups.append(nn.Parameter(stack))
+            # channels last: a sample's C features of one vertex share a cache line (grid_sample ~30% faster on
+            # the CPU for the large planes)
+            self.plane_groups.append(nn.Parameter(stack.contiguous(memory_format=torch.channels_last)))
 
     def touches_non_spatial(self, a: int, b: int) -> bool:
         return a >= self.spatial_dims or b >= self.spatial_dims

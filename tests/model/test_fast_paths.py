@@ -151,3 +151,20 @@ def test_fields_compile_without_graph_breaks(tiny_dataset, method):
         assert explained.graph_break_count == 0, (type(module).__name__, explained.break_reasons)
     compile_fields(model)  # in place: the state_dict keeps its keys
     assert all(not k.startswith("_orig_mod") and "._orig_mod" not in k for k in model.state_dict())
+
+
+def test_render_fast_path_matches_full_render_within_its_bound(trained_run, monkeypatch):
+    from stages.model import load_run
+    from stages.model.methods import livescene
+
+    run = load_run(trained_run)
+    cam_origins = np.tile(np.array([[0.0, 0.0, 0.0]]), (200, 1))
+    dirs = np.random.default_rng(0).normal(size=(200, 3))
+    state = np.full(len(run.objects), 0.5)
+    fast = run.render_rays(cam_origins, dirs, state, outputs=("rgb",))
+    assert set(fast) == {"rgb"}
+    bound = run.config.model.sampling.num_samples * livescene.RENDER_WEIGHT_FLOOR
+    monkeypatch.setattr(livescene, "RENDER_WEIGHT_FLOOR", -1.0)  # every sample gets its colour
+    full = run.render_rays(cam_origins, dirs, state)
+    assert {"rgb", "depth", "accumulation", "probs"} <= set(full)
+    assert np.abs(fast["rgb"] - full["rgb"]).max() <= bound + 1e-6

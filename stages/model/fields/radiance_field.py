@@ -40,10 +40,13 @@ class RadianceField(nn.Module):
         sigma = trunc_exp(raw + self.config.density_bias, self.config.density_exp_clamp)
         return sigma, geo
 
+    def color(self, geo: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        """Geometry features [N, geo_feat_dim] and unit view directions [N, 3] -> rgb [N, 3] in (0, 1)."""
+        d = self.direction_encoding(directions).to(geo.dtype)
+        return torch.sigmoid(self.color_mlp(torch.cat([d, geo], dim=-1)).float())
+
     def forward(self, coords: torch.Tensor, directions: torch.Tensor,
                 cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """-> density [N], rgb [N, 3] in (0, 1)."""
         sigma, geo = self.density(coords, cache)
-        d = self.direction_encoding(directions).to(geo.dtype)
-        rgb = torch.sigmoid(self.color_mlp(torch.cat([d, geo], dim=-1)).float())
-        return sigma, rgb
+        return sigma, self.color(geo, directions)
