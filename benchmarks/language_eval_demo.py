@@ -76,7 +76,7 @@ def fmt(x: float | None, digits: int = 2) -> str:
     return "n/a" if x is None else f"{x:.{digits}f}"
 
 
-def report(name: str, metrics: dict, run_json: dict) -> None:
+def report(name: str, metrics: dict, run_json: dict, timings: dict) -> None:
     held, unseen, ground = metrics["held_out"], metrics["unseen_combinations"], metrics["grounding"]
     print(f"\n== {name}: {len(metrics['objects'])} objects {metrics['objects']}")
     print(f"  training: {run_json.get('steps')} steps in {fmt(run_json.get('train_seconds'), 0)} s, "
@@ -86,7 +86,7 @@ def report(name: str, metrics: dict, run_json: dict) -> None:
           f"(min {fmt(held['psnr']['min'])}, max {fmt(held['psnr']['max'])})")
     print(f"  SSIM  {fmt(held['ssim']['mean'], 3)} +- {fmt(held['ssim']['std'], 3)}")
     print(f"  LPIPS {held['lpips_status'] if held['lpips'] is None else fmt(held['lpips']['mean'], 3)}")
-    print(f"  render fps {fmt(held['fps'], 3)} (CPU, 2 threads, shared machine)")
+    print(f"  render fps {fmt(timings['held_out']['fps'], 3)} (CPU, 2 threads, shared machine)")
     if unseen.get("status") == "computed":
         print(f"  unseen combinations: {unseen['n_unseen']} renders ({unseen['n_not_novel']} not novel enough, "
               f"excluded); truth poses by {unseen.get('truth_pose_source')}")
@@ -157,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
            work / name / "eval.log")
         metrics = json.loads((ev / "metrics.json").read_text())
         run_json = json.loads((run / "run.json").read_text()) if (run / "run.json").is_file() else {}
-        report(name, metrics, run_json)
+        report(name, metrics, run_json, json.loads((ev / "timings.json").read_text()))
         print(f"  relevancy maps: {sorted(p.name for p in (ev / 'grounding').glob('*.png'))[:4]} ... in {ev}/grounding")
         if not args.no_commands:
             commands(name, ds, run, work / name)

@@ -2,9 +2,11 @@
 
     livescene evaluate --run RUN --data DS --out DIR [--truth CAPTURE] [--pose-alignment pose_error.json]
 
-Writes DIR/metrics.json (per-image PSNR/SSIM with mean and std, LPIPS or why
-not, render fps, unseen-combination PSNR over the image and the moved objects,
-grounding IoU per query and mIoU) and PNG renders for the report.
+Writes DIR/metrics.json (per-image PSNR/SSIM with mean, std and 95% CI, LPIPS or
+why not, unseen-combination PSNR over the image and the moved objects, grounding
+IoU per query and view and mIoU), DIR/timings.json (render seconds and fps: kept
+apart so metrics.json is the same for every evaluation of one trained model) and
+PNG renders for the report.
 """
 
 from __future__ import annotations
@@ -30,6 +32,8 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     p.add_argument("--max-views", type=int, default=None, help="held-out views to evaluate (default: all)")
     p.add_argument("--unseen-views", type=int, default=3, help="held-out poses for unseen combinations")
     p.add_argument("--levels", default="0,0.5,1", help="levels of the unseen-combination test")
+    p.add_argument("--locality-views", type=int, default=2,
+                   help="held-out poses of the locality test (needs --truth; 0 = skip)")
     p.add_argument("--novelty-min", type=float, default=0.25,
                    help="least L-inf distance to training states for a combination to count as unseen")
     p.add_argument("--grounding-threshold", type=float, default=0.5, help="relevancy threshold of the grounding IoU")
@@ -85,23 +89,26 @@ def _evaluate(args: argparse.Namespace) -> int:
         grounder = Grounder(vocab, encoder_from_args(args))
     cfg = EvaluateConfig(max_views=args.max_views, unseen_views=args.unseen_views, levels=levels,
                          novelty_min=args.novelty_min, grounding_threshold=args.grounding_threshold,
-                         save_renders=not args.no_renders, render_scale=args.scale)
+                         save_renders=not args.no_renders, render_scale=args.scale,
+                         locality_views=args.locality_views)
     run = load_model_run(args.run, args.device)
     extra = {"run": str(args.run), "device": args.device,
              "encoder": getattr(grounder.encoder, "name", None) if grounder else None}
     metrics = evaluate_run(run, ds, args.out, truth, grounder, cfg, extra)
-    print(json.dumps(headline(metrics), indent=2))
+    timings = json.loads((Path(args.out) / "timings.json").read_text())
+    print(json.dumps(headline(metrics, timings), indent=2))
     return 0
 
 
-def headline(metrics: dict) -> dict:
-    """The numbers a person reads first (the full detail is in metrics.json)."""
+def headline(metrics: dict, timings: dict | None = None) -> dict:
+    """The numbers a person reads first (the full detail is in metrics.json, the render speed in timings.json)."""
     held = metrics["held_out"]
     unseen = metrics["unseen_combinations"]
     ground = metrics["grounding"]
     out = {"psnr": held["psnr"]["mean"], "psnr_std": held["psnr"]["std"], "ssim": held["ssim"]["mean"],
            "lpips": held["lpips_status"] if held["lpips"] is None else held["lpips"]["mean"],
-           "fps": held["fps"], "views": held["psnr"]["n"]}
+           "psnr_ci95": held["psnr"].get("ci95"),
+           "fps": ((timings or {}).get("held_out") or {}).get("fps"), "views": held["psnr"]["n"]}
     if unseen.get("status") == "computed":
         out |= {"unseen_psnr": unseen["psnr"]["mean"], "unseen_psnr_moved": unseen["psnr_moved"]["mean"],
                 "unseen_n": unseen["n_unseen"], "seen_reference_psnr": unseen["seen_reference"]["psnr"]["mean"]}

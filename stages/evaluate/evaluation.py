@@ -1,5 +1,8 @@
 """Evaluate a trained run: held-out views, unseen state combinations, grounding -> metrics.json.
 
+metrics.json holds only what depends on the run and the data, so two evaluations of one trained
+model write the same bytes; every wall-clock number (render seconds, fps) goes to timings.json.
+
 The run is anything with the model stage's render API: ``.objects`` and
 ``.render(camera, c2w, states, frame_index=None)`` returning numpy ``rgb``
 ``[H, W, 3]``, ``probs`` ``[H, W, alpha + 1]`` (background last) and, when
@@ -19,11 +22,13 @@ from tqdm import tqdm
 
 from stages.scene import Camera, Frame, InputError, SceneDataset, atomic_dir, write_json
 
+from .locality import locality
 from .metrics import Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
 from .unseen_states import unseen_combinations
 
-EVALUATE_VERSION = 1
+EVALUATE_VERSION = 2
+"""2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames."""
 
 
 @dataclass
@@ -44,6 +49,8 @@ class EvaluateConfig:
     """Relevancy above which a pixel belongs to the queried object."""
     save_renders: bool = True
     """Write PNGs (held-out renders, unseen model|truth pairs, grounding maps) for the report."""
+    locality_views: int = 2
+    """Held-out poses of the locality test (each object at 0 and 1, truth swept region; needs truth)."""
     max_unseen_images: int = 12
     """How many unseen-combination model|truth pairs are saved as PNG."""
     render_scale: float = 1.0
@@ -82,6 +89,8 @@ class Evaluator:
         self.truth = truth
         self.grounder = grounder
         self.config = config or EvaluateConfig()
+        self.timings: dict[str, Any] = {}
+        """Wall-clock numbers of the last evaluation (timings.json), kept out of the metrics."""
         run_objects = list(getattr(run, "objects", dataset.objects))
         if run_objects != list(dataset.objects):
             raise InputError(dataset.root / "mapping.yaml", f"the run's objects {run_objects} differ from the "
@@ -93,9 +102,12 @@ class Evaluator:
         cam = self.ds.camera_of(frame)
         return cam if self.config.render_scale == 1.0 else cam.scaled(self.config.render_scale)
 
-    def _render(self, frame: Frame, states: dict[str, float] | None) -> dict[str, np.ndarray]:
+    def _render(self, frame: Frame, states: dict[str, float] | None,
+                rgb_only: bool = False) -> dict[str, np.ndarray]:
+        """The run's render of ``frame``'s view; ``rgb_only`` takes the model's fast path (no probs, no language)."""
+        extra = {"outputs": ("rgb",)} if rgb_only else {}
         return self.run.render(self._camera(frame), np.asarray(frame.c2w, float), states,
-                               frame_index=self.ds.frames.index(frame))
+                               frame_index=self.ds.frames.index(frame), **extra)
 
     def _image(self, frame: Frame) -> np.ndarray:
         """The dataset image at the render scale (area averaging, as a camera with larger pixels would see)."""
@@ -146,13 +158,13 @@ class Evaluator:
             "ssim": summarize([r["ssim"] for r in records]),
             "lpips": summarize([r["lpips"] for r in records]) if lpips.available else None,
             "lpips_status": lpips.status,
-            "render_seconds": render_seconds,
-            "fps": len(frames) / render_seconds if render_seconds > 0 else None,
             "image_size": [cam.width, cam.height],
             "state_source": "run's learned state at the frame index" if learned
             else "dataset per-frame state" if all(f.state for f in frames)
             else "dataset per-frame state; the run's own state at the frame index where the dataset has none",
         }
+        self.timings["held_out"] = {"render_seconds": render_seconds, "views": len(frames),
+                                    "fps": len(frames) / render_seconds if render_seconds > 0 else None}
         return summary, kept
 
     # -- 2. unseen state combinations -----------------------------------------------------------------------
@@ -165,7 +177,8 @@ class Evaluator:
         combos = unseen_combinations(len(objects), train_states, cfg.levels, cfg.novelty_min)
         views = _evenly(self.ds.frames_in("test"), cfg.unseen_views)
         records, seen = [], []
-        saved = 0
+        saved = model_renders = 0
+        render_seconds = 0.0
         pose_sources = set()
         for frame in tqdm(views, desc="unseen combinations", unit="view"):
             cam = self._camera(frame)
@@ -178,7 +191,10 @@ class Evaluator:
                 # the same view at its own (seen) state: the reference the unseen scores are read against
                 own = self.truth.renderer.render(t_c2w, own_state, camera=tcam)
                 own_ids = own["ids"]
-                seen_rgb = np.asarray(self._render(frame, own_state)["rgb"], dtype=np.float64)
+                t0 = time.perf_counter()
+                seen_rgb = np.asarray(self._render(frame, own_state, rgb_only=True)["rgb"], dtype=np.float64)
+                render_seconds += time.perf_counter() - t0
+                model_renders += 1
                 obj_region = np.isin(own_ids, list(self.truth.object_ids.values()))
                 seen.append({"frame": frame.frame_id,
                              "psnr": _finite_or_none(psnr(seen_rgb, np.asarray(own["rgb"], np.float64))),
@@ -186,18 +202,27 @@ class Evaluator:
                                                                   obj_region))})
             for ci, combo in enumerate(combos):
                 states = dict(zip(objects, combo.values, strict=True))
-                model_rgb = np.asarray(self._render(frame, states)["rgb"], dtype=np.float64)
+                moved = [o for o in objects if abs(states[o] - own_state.get(o, -1.0)) > cfg.moved_threshold]
+                record = {"frame": frame.frame_id, "combination": ci, "states": states,
+                          "anchor": objects[combo.anchor], "level": combo.level,
+                          "novelty": _finite_or_none(combo.novelty), "unseen": combo.unseen,
+                          "rendered": combo.unseen, "moved_objects": moved}
+                if not combo.unseen:
+                    # too close to a training state to test independent control: listed, never rendered,
+                    # so the evaluation's time goes to the combinations it scores
+                    records.append(record | {"moved_pixels": None, "psnr": None, "psnr_moved": None, "ssim": None})
+                    continue
+                t0 = time.perf_counter()
+                model_rgb = np.asarray(self._render(frame, states, rgb_only=True)["rgb"], dtype=np.float64)
+                render_seconds += time.perf_counter() - t0
+                model_renders += 1
                 t = self.truth.renderer.render(t_c2w, states, camera=tcam)
                 truth_rgb = np.asarray(t["rgb"], dtype=np.float64)
-                moved = [o for o in objects if abs(states[o] - own_state.get(o, -1.0)) > cfg.moved_threshold]
                 moved_ids = [self.truth.object_ids[o] for o in moved if o in self.truth.object_ids]
                 region = np.isin(t["ids"], moved_ids)
                 if own_ids is not None:
                     region |= np.isin(own_ids, moved_ids)  # the swept region: where it was and where it is
-                records.append({
-                    "frame": frame.frame_id, "combination": ci, "states": states, "anchor": objects[combo.anchor],
-                    "level": combo.level, "novelty": _finite_or_none(combo.novelty), "unseen": combo.unseen,
-                    "moved_objects": moved,
+                records.append(record | {
                     "moved_pixels": int(region.sum()),
                     "psnr": _finite_or_none(psnr(model_rgb, truth_rgb)),
                     "psnr_moved": _finite_or_none(psnr(model_rgb, truth_rgb, region)),
@@ -208,6 +233,7 @@ class Evaluator:
                             np.concatenate([model_rgb, truth_rgb], axis=1))
                     saved += 1
         unseen = [r for r in records if r["unseen"]]
+        self.timings["unseen_combinations"] = {"model_render_seconds": render_seconds, "model_renders": model_renders}
         return {
             "status": "computed",
             "truth": self.truth.origin,
@@ -256,7 +282,7 @@ class Evaluator:
             weights = self.grounder.object_weights(q["query"])
             entry["object_weights"] = dict(zip(self.ds.objects, map(float, weights), strict=True))
             for source in sources:
-                ious = []
+                ious, frames = [], []
                 for (frame, out), masks in zip(rendered, truth_masks, strict=True):
                     truth = masks[..., q["index"]]
                     if not truth.any():
@@ -268,10 +294,11 @@ class Evaluator:
                     else:
                         rel = self.grounder.relevancy_from_language_objects(out["language"], q["query"])
                     ious.append(iou(rel > self.config.grounding_threshold, truth))
+                    frames.append(frame.frame_id)  # per-view IoUs pair up across methods by (query, frame)
                     if out_dir is not None and self.config.save_renders and len(ious) == 1:
                         slug = q["query"].replace(" ", "-")
                         _to_png(out_dir / "grounding" / f"{source}_{slug}_{frame.frame_id}.png", rel)
-                entry[source] = {"iou": summarize(ious), "per_view": ious}
+                entry[source] = {"iou": summarize(ious), "per_view": ious, "frames": frames}
             results["queries"].append(entry)
         for source in sources:
             for kind in ("name", "synonym"):
@@ -297,12 +324,33 @@ class Evaluator:
             out.append(np.stack(chans, axis=-1))
         return out
 
+    # -- 4. locality ----------------------------------------------------------------------------------------
+    def locality(self) -> dict[str, Any]:
+        if self.truth is None:
+            return {"status": "skipped: no truth capture given (--truth)"}
+        frames = _evenly(self.ds.frames_in("test"), self.config.locality_views)
+        if not frames or not self.ds.objects:
+            return {"status": "skipped: no held-out view or no object"}
+        return locality(lambda f, st: self._render(f, st, rgb_only=True)["rgb"], self.truth, frames, self._camera,
+                        self.ds.objects)
+
     # -- everything -----------------------------------------------------------------------------------------
     def evaluate(self, out_dir: Path | None = None) -> dict[str, Any]:
+        """The metrics (deterministic for a deterministic run); wall-clock numbers land in ``self.timings``."""
+        self.timings = {}
         t0 = time.perf_counter()
         held, rendered = self.held_out(out_dir)
+        t1 = time.perf_counter()
         unseen = self.unseen(out_dir)
+        t2 = time.perf_counter()
         grounding = self.grounding(rendered, out_dir)
+        t3 = time.perf_counter()
+        local = self.locality()
+        self.timings["locality"] = {"seconds": time.perf_counter() - t3}
+        self.timings["held_out"]["seconds"] = t1 - t0
+        self.timings.setdefault("unseen_combinations", {})["seconds"] = t2 - t1
+        self.timings["grounding"] = {"seconds": t3 - t2}
+        self.timings["seconds"] = t3 - t0
         return {
             "evaluate_version": EVALUATE_VERSION,
             "dataset": str(self.ds.root),
@@ -311,18 +359,24 @@ class Evaluator:
             "held_out": held,
             "unseen_combinations": unseen,
             "grounding": grounding,
-            "seconds": time.perf_counter() - t0,
+            "locality": local,
         }
 
 
 def evaluate_run(run: Any, dataset: SceneDataset, out_dir: str | Path, truth: TruthSource | None = None,
                  grounder: Any | None = None, config: EvaluateConfig | None = None,
                  extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Evaluate and write ``out_dir`` atomically: metrics.json plus PNG renders. Returns the metrics."""
+    """Evaluate and write ``out_dir`` atomically: metrics.json, timings.json and PNG renders. Returns the metrics.
+
+    metrics.json is identical between evaluations of one trained model; the wall-clock numbers
+    (render seconds, fps, stage seconds) are in timings.json next to it.
+    """
     out_dir = Path(out_dir)
     with atomic_dir(out_dir) as tmp:
-        metrics = Evaluator(run, dataset, truth, grounder, config).evaluate(tmp)
+        evaluator = Evaluator(run, dataset, truth, grounder, config)
+        metrics = evaluator.evaluate(tmp)
         if extra:
             metrics.update(extra)
         write_json(tmp / "metrics.json", metrics)
+        write_json(tmp / "timings.json", evaluator.timings)
     return metrics

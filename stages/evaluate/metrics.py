@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,13 +57,30 @@ def iou(pred: np.ndarray, truth: np.ndarray) -> float:
     return float(np.logical_and(pred, truth).sum()) / union
 
 
-def summarize(values: list[float]) -> dict[str, float | int | None]:
-    """Mean, std (population), min, max and count of the finite values (None when there are none)."""
+def summarize(values: list[float]) -> dict[str, Any]:
+    """Mean, std (population), min, max, count and 95% CI of the mean of the finite values.
+
+    ``ci95`` is ``[lo, hi]`` from Student's t with n - 1 degrees of freedom and the sample (n - 1) std: the
+    interval a reader needs to tell a difference from noise. None when n < 2 (no spread to estimate);
+    the other values are None when there are no finite values at all.
+    """
     arr = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=np.float64)
     if arr.size == 0:
-        return {"mean": None, "std": None, "min": None, "max": None, "n": 0}
-    return {"mean": float(arr.mean()), "std": float(arr.std()), "min": float(arr.min()), "max": float(arr.max()),
-            "n": int(arr.size)}
+        return {"mean": None, "std": None, "min": None, "max": None, "n": 0, "ci95": None}
+    mean = float(arr.mean())
+    return {"mean": mean, "std": float(arr.std()), "min": float(arr.min()), "max": float(arr.max()),
+            "n": int(arr.size), "ci95": _ci95(arr, mean)}
+
+
+def _ci95(arr: np.ndarray, mean: float) -> list[float] | None:
+    """Student-t 95% confidence interval of the mean of ``arr``; None for fewer than two values."""
+    n = int(arr.size)
+    if n < 2:
+        return None
+    from scipy import stats
+
+    half = float(stats.t.ppf(0.975, n - 1)) * float(arr.std(ddof=1)) / math.sqrt(n)
+    return [mean - half, mean + half]
 
 
 class Lpips:

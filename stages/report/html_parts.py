@@ -20,6 +20,8 @@ figure img{display:block;image-rendering:pixelated;width:192px}
 nav a{margin-right:10px;font-size:14px}
 .slider{display:inline-block;margin:10px 16px 20px 0;vertical-align:top}.slider img{width:288px;image-rendering:auto}
 .note{color:#555;font-size:13px}
+.flag{display:inline-block;color:#8b0000;background:#ffe8e8;border-left:4px solid #d00020;padding:3px 8px;
+font-weight:bold}
 """
 
 

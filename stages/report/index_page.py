@@ -21,11 +21,32 @@ def build_index(summary_files: list[str | Path]) -> str:
         except (OSError, json.JSONDecodeError) as exc:
             raise InputError(path, f"unreadable scene summary ({exc})", "re-run the scene's report rule") from exc
         methods = "<br>".join(f"{escape(name)}: PSNR {fmt(v.get('psnr'), 2)} dB, SSIM {fmt(v.get('ssim'), 3)}, "
-                              f"{fmt(v.get('train_seconds'), 0)} s training" for name, v in s["methods"].items())
+                              f"{fmt(v.get('train_seconds'), 0)} s training" + _flag(v.get("trust"))
+                              for name, v in s["methods"].items())
         rows.append([f'<a href="{escape(s["page"])}">{escape(s["scene"])}</a>',
                      escape(", ".join(s.get("objects", []))), s.get("frames"), s.get("registered_fraction"),
-                     methods or "–", escape(", ".join(s.get("skipped", [])) or "none"), s.get("job_seconds")])
-    body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline.</p>"
-            + table(["scene", "objects", "frames", "poses registered", "methods (held-out)", "rules skipped",
-                     "job seconds"], rows))
+                     methods or "–", _verdicts(s.get("verdict") or []),
+                     escape(", ".join(s.get("skipped", [])) or "none"), s.get("job_seconds")])
+    body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline. A flagged run "
+            "(&#9888;) is under its trust floors: its numbers are not results.</p>"
+            + table(["scene", "objects", "frames", "poses registered", "methods (held-out)",
+                     "LiveScene vs baselines (paired, 95% CI)", "rules skipped", "job seconds"], rows))
     return page("LiveScene reports", body)
+
+
+def _flag(trust: dict | None) -> str:
+    if not trust or not trust.get("flagged"):
+        return ""
+    return f' <span class="flag">&#9888; {escape(str(trust.get("label", "flagged")))}</span>'
+
+
+def _verdicts(rows: list[dict]) -> str:
+    """One line per baseline and metric; a verdict resting on a flagged run says so."""
+    lines = []
+    for r in rows:
+        line = f"vs {escape(str(r.get('baseline')))}, {escape(str(r.get('metric')))}: {escape(str(r.get('verdict')))}"
+        if r.get("rests_on_flagged_run"):
+            flagged = escape(", ".join(r["rests_on_flagged_run"]))
+            line += f' <span class="flag">&#9888; rests on flagged {flagged}</span>'
+        lines.append(line)
+    return "<br>".join(lines) or "–"

@@ -75,6 +75,45 @@ def train_curve(path: Path) -> tuple[list[float], list[float], list[float], list
     return xs, ps, lx, ls
 
 
+def train_curve_by_step(path: Path) -> tuple[list[float], list[float], list[float], list[float]]:
+    """(step, eval_psnr) where evaluated, and (step, loss) of every logged step, from train_log.csv.
+
+    With step-budgeted training (every method the same steps) this is the fair axis: wall time also
+    measures the machine and its load.
+    """
+    xs, ps, lx, ls = [], [], [], []
+    for row in read_csv_rows(path):
+        try:
+            step = float(row.get("step", ""))
+        except ValueError:
+            continue
+        try:
+            if row.get("eval_psnr"):
+                ps.append(float(row["eval_psnr"]))
+                xs.append(step)
+        except ValueError:
+            pass
+        try:
+            if row.get("loss"):
+                ls.append(float(row["loss"]))
+                lx.append(step)
+        except ValueError:
+            pass
+    return xs, ps, lx, ls
+
+
+def read_yaml(path: Path) -> Any:
+    """A YAML file, or None when absent; a corrupt file is an input error naming it."""
+    import yaml
+
+    if not path.is_file():
+        return None
+    try:
+        return yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise InputError(path, f"is not readable YAML ({exc})", "re-run the rule that writes it") from exc
+
+
 def state_errors_vs_truth(states_csv: Path, truth_csv: Path) -> dict[str, dict[str, float]]:
     """Per object: MAE / max of the interpolated states against the truth (matched on frame file name)."""
     pred = {(r["frame"], r["object"]): float(r["value"]) for r in read_csv_rows(states_csv)}
@@ -95,8 +134,14 @@ class MethodData:
     """run.json of the run (None when training did not finish)."""
     curve: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
     """train_log.csv as (wall_s, eval_psnr, wall_s, loss)."""
+    step_curve: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
+    """train_log.csv as (step, eval_psnr, step, loss)."""
+    config: dict | None = None
+    """config.yaml of the run (a RunConfig dict; its ``trust`` section sets the trust floors)."""
     metrics: dict | None = None
     """metrics.json of the evaluation."""
+    timings: dict | None = None
+    """timings.json of the evaluation (render seconds, fps): wall-clock numbers kept out of metrics.json."""
     eval_dir: Path | None = None
     sweep: dict | None = None
     """sweep.json of the state sweep (None when no sweep was rendered)."""
@@ -159,8 +204,11 @@ def collect_scene(scene: str, results: str | Path, *, data: str | Path | None, t
         run_dir = root / "runs" / name
         m.run = read_json(run_dir / "run.json")
         m.curve = train_curve(run_dir / "train_log.csv")
+        m.step_curve = train_curve_by_step(run_dir / "train_log.csv")
+        m.config = read_yaml(run_dir / "config.yaml")
         eval_dir = root / "eval" / name
         m.metrics = read_json(eval_dir / "metrics.json")
+        m.timings = read_json(eval_dir / "timings.json")
         m.eval_dir = eval_dir if eval_dir.is_dir() else None
         sweep_dir = root / "sweep" / name
         m.sweep = read_json(sweep_dir / "sweep.json")

@@ -10,8 +10,10 @@ from typing import Any
 
 from .html_parts import fmt, missing, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
+from .paired import LIVESCENE, PairedResult, compare
 from .scene_data import MethodData, SceneData
 from .svg_plot import Series, bar_chart_svg, line_plot_svg
+from .trust import TrustFlag, assess_run
 
 SECTIONS = [
     ("rules", "Rules run and skipped"),
@@ -19,7 +21,8 @@ SECTIONS = [
     ("poses", "Pose quality"),
     ("states", "Interpolation errors"),
     ("methods", "Methods"),
-    ("curves", "Error against run time"),
+    ("verdict", "Verdict: LiveScene against each baseline"),
+    ("curves", "Error against steps and run time"),
     ("grid", "Held-out views"),
     ("sliders", "Object state sliders"),
     ("relevancy", "Relevancy maps"),
@@ -128,11 +131,40 @@ def _metric(m: MethodData, *keys: str) -> Any:
     return value
 
 
+def scene_trust(sd: SceneData) -> dict[str, TrustFlag]:
+    """The trust flag of every method that trained or was evaluated."""
+    return {m.name: assess_run(m.name, m.run, m.config, m.metrics, sd.results / "runs" / m.name / "config.yaml")
+            for m in sd.methods if m.run is not None or m.metrics is not None}
+
+
+def _flag_html(flag: TrustFlag | None) -> str:
+    """A visible warning next to a run's numbers (or 'ok' with the floors it passed)."""
+    if flag is None:
+        return "–"
+    if not flag.flagged:
+        return (f'<span class="ok">ok</span><br><span class="note">&ge; {flag.floors["min_steps"]:,.0f} steps, '
+                f'PSNR &ge; {fmt(flag.floors["min_psnr"], 1)} dB, mIoU &ge; '
+                f'{fmt(flag.floors["min_grounding_miou"], 2)}</span>')
+    return (f'<span class="flag">&#9888; {escape(flag.label)}: '
+            + "; ".join(escape(r) for r in flag.reasons) + "</span>")
+
+
+def _flag_banner(flags: dict[str, TrustFlag]) -> str:
+    flagged = [f for f in flags.values() if f.flagged]
+    if not flagged:
+        return ""
+    names = ", ".join(f"{escape(f.method)} ({escape(f.label)})" for f in flagged)
+    return (f'<p class="flag">&#9888; Not results: {names}. These runs fail the trust checks of their config '
+            f"(trust section of config.yaml; the reasons are in the methods table's trust column): their numbers "
+            f"are shown for diagnosis only.</p>")
+
+
 def section_methods(sd: SceneData) -> str:
     rows = []
+    flags = scene_trust(sd)
     for m in sd.methods:
         if m.run is None and m.metrics is None:
-            rows.append([escape(m.name)] + [escape(_why_skipped(sd, f"train[{m.name}]"))] + [None] * 9)
+            rows.append([escape(m.name)] + [escape(_why_skipped(sd, f"train[{m.name}]"))] + [None] * 10)
             continue
         lpips = _metric(m, "held_out", "lpips", "mean")
         lpips_cell = fmt(lpips) if lpips is not None else escape(
@@ -140,15 +172,61 @@ def section_methods(sd: SceneData) -> str:
         run = m.run or {}
         params = (run.get("params") or {}).get("total")
         grounding = _metric(m, "grounding", "miou_probs")
-        rows.append([escape(m.name), _metric(m, "held_out", "psnr", "mean"), _metric(m, "held_out", "ssim", "mean"),
+        fps = ((m.timings or {}).get("held_out") or {}).get("fps")  # wall clock: timings.json, not metrics.json
+        rows.append([escape(m.name), _flag_html(flags.get(m.name)), _metric(m, "held_out", "psnr", "mean"),
+                     _metric(m, "held_out", "ssim", "mean"),
                      lpips_cell, _metric(m, "unseen_combinations", "psnr", "mean"),
                      grounding if isinstance(grounding, (int, float)) else None,
                      params, run.get("peak_memory_mib"), run.get("train_seconds"), run.get("steps"),
-                     _metric(m, "held_out", "fps")])
+                     fps if isinstance(fps, (int, float)) else None])
     return ("<p>Held-out views of the test split; unseen combinations and grounding need truth and names. "
-            "Memory is the training process's peak (max RSS on CPU).</p>"
-            + table(["method", "PSNR dB", "SSIM", "LPIPS", "unseen PSNR dB", "grounding mIoU (probs)", "parameters",
-                     "peak memory MiB", "train s", "steps", "render fps"], rows))
+            "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
+            "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
+            "not complete is flagged, and its numbers are not results.</p>"
+            + _flag_banner(flags)
+            + table(["method", "trust", "PSNR dB", "SSIM", "LPIPS", "unseen PSNR dB", "grounding mIoU (probs)",
+                     "parameters", "peak memory MiB", "train s", "steps", "render fps"], rows))
+
+
+def scene_verdict(sd: SceneData, flags: dict[str, TrustFlag] | None = None) -> list[PairedResult]:
+    """Paired differences of LiveScene against each evaluated baseline (see stages.report.paired)."""
+    flags = scene_trust(sd) if flags is None else flags
+    return compare({m.name: m.metrics for m in sd.methods if m.metrics is not None},
+                   {name: f.label for name, f in flags.items() if f.flagged})
+
+
+def _interval(ci: list[float] | None, unit: str) -> str:
+    if ci is None:
+        return "– (n &lt; 2)"
+    return f"[{fmt(ci[0], 3)}, {fmt(ci[1], 3)}]{' ' + unit if unit else ''}"
+
+
+def section_verdict(sd: SceneData) -> str:
+    names = [m.name for m in sd.methods]
+    if LIVESCENE not in names:
+        return missing("LiveScene is not among this scene's methods: there is nothing to compare.")
+    if not any(m.name == LIVESCENE and m.metrics for m in sd.methods):
+        return missing("No LiveScene evaluation to compare: " + _why_skipped(sd, f"evaluate[{LIVESCENE}]"))
+    flags = scene_trust(sd)
+    results = scene_verdict(sd, flags)
+    if not results:
+        return missing("No evaluated baseline to compare LiveScene against (methods: " + ", ".join(names) + ").")
+    rows = []
+    for r in results:
+        cls = {"LiveScene ahead": "ok", "LiveScene behind": "fail"}.get(r.verdict, "skip")
+        cell = f'<span class="{cls}">{escape(r.verdict)}</span>'
+        if r.flagged:
+            cell += ('<br><span class="flag">&#9888; rests on a flagged run: '
+                     + ", ".join(f"{escape(n)} ({escape(label)})" for n, label in r.flagged.items()) + "</span>")
+        if r.note:
+            cell += f'<br><span class="note">{escape(r.note)}</span>'
+        mean = f"{fmt(r.mean, 3)}{' ' + r.unit if r.unit and r.mean is not None else ''}"
+        rows.append([escape(r.baseline), escape(r.label), r.n, mean, _interval(r.ci95, r.unit), cell])
+    return ("<p>LiveScene minus the baseline on the same items (same views, same unseen state vectors, same "
+            "grounding queries and views): mean difference and its 95% Student-t interval. A verdict says "
+            "ahead or behind only when the interval excludes 0; higher is better for every metric here.</p>"
+            + _flag_banner(flags)
+            + table(["baseline", "paired metric", "n", "mean difference", "95% CI", "verdict"], rows))
 
 
 def section_curves(sd: SceneData) -> str:
@@ -164,8 +242,23 @@ def section_curves(sd: SceneData) -> str:
     if not series:
         return missing("No periodic evaluation in any train_log.csv (training did not run or logged no eval_psnr).")
     loss = [Series(m.name, m.curve[2], m.curve[3]) for m in sd.methods if m.curve[2]]
-    return ("<p>Periodic held-out PSNR logged during training (higher PSNR = lower error), against wall-clock "
-            "seconds; every method on one plot.</p>"
+    by_step = []
+    for m in sd.methods:
+        xs, ys = list(m.step_curve[0]), list(m.step_curve[1])
+        final = (m.run or {}).get("eval_psnr"), (m.run or {}).get("steps")
+        if all(isinstance(v, (int, float)) for v in final) and (not xs or final[1] > xs[-1]):
+            xs.append(float(final[1]))  # run.json's final evaluation closes the curve
+            ys.append(float(final[0]))
+        if xs:
+            by_step.append(Series(m.name, xs, ys))
+    loss_by_step = [Series(m.name, m.step_curve[2], m.step_curve[3]) for m in sd.methods if m.step_curve[2]]
+    return ("<p>Periodic held-out PSNR logged during training (higher PSNR = lower error), every method on one "
+            "plot: against optimisation steps (the fair axis when every method trains the same steps), then "
+            "against wall-clock seconds (which also measure the machine and its load).</p>"
+            + line_plot_svg(by_step, x_label="training step", y_label="eval PSNR (dB)",
+                            title="held-out error against steps")
+            + line_plot_svg(loss_by_step, x_label="training step", y_label="training loss",
+                            title="training loss against steps")
             + line_plot_svg(series, x_label="training wall time (s)", y_label="eval PSNR (dB)",
                             title="held-out error against run time")
             + line_plot_svg(loss, x_label="training wall time (s)", y_label="training loss",
@@ -327,14 +420,19 @@ def section_stability(sd: SceneData) -> str:
 
 
 def scene_summary(sd: SceneData) -> dict:
-    """Headline numbers for the index page."""
+    """Headline numbers for the index page, with each run's trust flag and the paired verdict."""
+    flags = scene_trust(sd)
     return {"scene": sd.scene, "page": f"scenes/{sd.scene}.html",
             "objects": (sd.dataset_info or {}).get("objects", []),
             "frames": (sd.dataset_info or {}).get("frames"),
             "registered_fraction": (sd.poses or {}).get("registered_fraction"),
             "methods": {m.name: {"psnr": _metric(m, "held_out", "psnr", "mean"),
                                  "ssim": _metric(m, "held_out", "ssim", "mean"),
-                                 "train_seconds": (m.run or {}).get("train_seconds")} for m in sd.methods},
+                                 "train_seconds": (m.run or {}).get("train_seconds"),
+                                 "steps": (m.run or {}).get("steps"),
+                                 "trust": flags[m.name].to_dict() if m.name in flags else None}
+                        for m in sd.methods},
+            "verdict": [r.to_dict() for r in scene_verdict(sd, flags)],
             "skipped": [k for k, v in sd.plan.items() if not v.get("needed")],
             "job_seconds": round(sum(v["s"] for v in sd.benchmarks.values() if math.isfinite(v["s"])), 1)}
 
@@ -349,7 +447,8 @@ def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
     nav = "<nav>" + "".join(f'<a href="#{k}">{escape(t)}</a>' for k, t in SECTIONS) + "</nav>"
     sliders, images = section_sliders(sd)
     bodies = {"rules": section_rules(sd), "timings": section_timings(sd), "poses": section_poses(sd),
-              "states": section_states(sd), "methods": section_methods(sd), "curves": section_curves(sd),
+              "states": section_states(sd), "methods": section_methods(sd), "verdict": section_verdict(sd),
+              "curves": section_curves(sd),
               "grid": section_grid(sd, views), "sliders": sliders, "relevancy": section_relevancy(sd),
               "unseen": section_unseen(sd), "commands": section_commands(sd), "stability": section_stability(sd)}
     body = head + nav + "".join(f'<section id="{k}"><h2>{escape(t)}</h2>{bodies[k]}</section>' for k, t in SECTIONS)

@@ -62,7 +62,7 @@ class FakeRun:
         self.truth = truth
         self.rendered: list[tuple[int | None, dict | None]] = []
 
-    def render(self, camera, c2w, states, frame_index=None):
+    def render(self, camera, c2w, states, frame_index=None, outputs=None):
         self.rendered.append((frame_index, states))
         frame = self.ds.frames[frame_index]
         if states == frame.state:  # the held-out view at its own state: the stored (PNG) image

@@ -34,7 +34,7 @@ def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
         assert 0 < v["ssim"] < 1
     assert held["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
     assert held["psnr"]["std"] == pytest.approx(0.0, abs=1e-9)
-    assert held["fps"] > 0 and held["image_size"] == [16, 12]
+    assert held["image_size"] == [16, 12]
     assert held["lpips"] is None or held["lpips_status"].startswith("computed")
     # each held-out view was rendered at its own state and frame index
     assert (0, ds.frames[0].state) in run.rendered
@@ -66,6 +66,9 @@ def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
         assert q["probs"]["iou"]["n"] == 4
     assert ground["miou_probs_name"] == pytest.approx(1.0) and ground["miou_probs_synonym"] == pytest.approx(1.0)
 
+    timings = json.loads((out / "timings.json").read_text())
+    assert timings["held_out"]["fps"] > 0 and timings["held_out"]["views"] == 4 and timings["seconds"] > 0
+    assert "fps" not in held and "render_seconds" not in held and "seconds" not in metrics
     written = json.loads((out / "metrics.json").read_text())
     assert written["held_out"]["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
     assert sorted(p.name for p in (out / "renders").iterdir()) == ["00000.png", "00002.png", "00004.png",
@@ -169,3 +172,85 @@ def test_grounding_from_rendered_language_only_in_the_same_space(eval_scene, tmp
     metrics = evaluate_run(other, ds, tmp_path / "b", None, grounder, EvaluateConfig(save_renders=False))
     assert metrics["grounding"]["sources"] == ["probs"]
     assert metrics["grounding"]["language_source"].startswith("skipped: run trained with encoder")
+
+
+def _keys(tree) -> set[str]:
+    """Every dict key anywhere in a JSON tree."""
+    if isinstance(tree, dict):
+        return set(tree) | {k for v in tree.values() for k in _keys(v)}
+    if isinstance(tree, list):
+        return {k for v in tree for k in _keys(v)}
+    return set()
+
+
+def test_metrics_json_is_identical_between_two_evaluations(eval_scene, tmp_path):
+    """Wall-clock numbers live in timings.json, so evaluating one model twice writes the same metrics.json bytes."""
+    ds, run, truth = eval_scene
+    outs = [tmp_path / "first", tmp_path / "second"]
+    for out in outs:
+        evaluate_run(run, ds, out, truth, _grounder(ds), EvaluateConfig(unseen_views=2))
+    first, second = ((o / "metrics.json").read_bytes() for o in outs)
+    assert first == second
+    metrics = json.loads(first)
+    assert not _keys(metrics) & {"seconds", "render_seconds", "fps", "wall_s"}
+    # no trace of the output folder or the atomic write's temporary folder next to it (".first.xxxx")
+    assert str(outs[0]) not in first.decode() and ".first." not in first.decode()
+    timings = [json.loads((o / "timings.json").read_text()) for o in outs]
+    assert all(t["held_out"]["render_seconds"] > 0 and t["held_out"]["fps"] > 0 for t in timings)
+    per_view = metrics["unseen_combinations"]["n_unseen"] // 2
+    assert timings[0]["unseen_combinations"]["model_renders"] == 2 * (1 + per_view)  # seen reference + unseen
+
+
+def test_only_novel_combinations_are_rendered(eval_scene, tmp_path):
+    ds, run, truth = eval_scene
+    # training states lie on the diagonal at 1/7, 3/7, 5/7, 1: (0, 1) and (1, 0) are 0.57 away, (0.5, 0) and (0, 0.5)
+    # only 0.36, so with novelty_min 0.4 those two are recorded but must not cost a render
+    cfg = EvaluateConfig(unseen_views=2, novelty_min=0.4, save_renders=False, locality_views=0)
+    metrics = evaluate_run(run, ds, tmp_path / "e", truth, None, cfg)
+    unseen = metrics["unseen_combinations"]
+    combos = {tuple(c["values"]): c["unseen"] for c in unseen["combinations"]}
+    assert combos == {(0.0, 1.0): True, (0.5, 0.0): False, (1.0, 0.0): True, (0.0, 0.5): False}
+    assert unseen["n_unseen"] == 4 and unseen["n_not_novel"] == 4  # 2 views x 2 combinations each
+    for r in unseen["records"]:
+        assert r["rendered"] == r["unseen"]
+        if r["unseen"]:
+            assert r["psnr"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6) and r["moved_pixels"] > 0
+        else:
+            assert r["psnr"] is None and r["psnr_moved"] is None and r["ssim"] is None and r["moved_objects"]
+    rendered_states = [tuple(st.values()) for _, st in run.rendered if st is not None]
+    assert (0.5, 0.0) not in rendered_states and (0.0, 0.5) not in rendered_states
+    assert rendered_states.count((0.0, 1.0)) == 2 and rendered_states.count((1.0, 0.0)) == 2
+    # held-out: 4 views; unseen: per view the seen reference plus the 2 novel combinations
+    assert len(run.rendered) == 4 + 2 * (1 + 2)
+    timings = json.loads((tmp_path / "e" / "timings.json").read_text())
+    assert timings["unseen_combinations"]["model_renders"] == 2 * (1 + 2)
+
+
+def test_grounding_per_view_ious_name_their_frames(eval_scene, tmp_path):
+    ds, run, _ = eval_scene
+    metrics = evaluate_run(run, ds, tmp_path / "e", None, _grounder(ds), EvaluateConfig(save_renders=False))
+    for q in metrics["grounding"]["queries"]:
+        assert q["probs"]["frames"] == ["00000", "00002", "00004", "00006"]
+        assert len(q["probs"]["per_view"]) == len(q["probs"]["frames"])
+
+
+def test_locality_passes_a_local_run_and_fails_one_that_repaints_the_room(eval_scene, tmp_path):
+    ds, run, truth = eval_scene
+    cfg = EvaluateConfig(max_views=1, unseen_views=1, save_renders=False, locality_views=2)
+    local = evaluate_run(run, ds, tmp_path / "local", truth, None, cfg)["locality"]
+    assert local["status"] == "computed" and local["all_local"]
+    fridge = local["objects"]["fridge"]
+    # the fake moves only the fridge's columns (0..5) by 0.5; the swept region is those columns dilated by 2 px
+    # (outside: only the PNG rounding of the one render that falls on a stored image)
+    assert fridge["model_outside_x255"]["mean"] == pytest.approx(0.0, abs=0.5)
+    assert fridge["model_inside_x255"]["mean"] == pytest.approx(0.5 * 255 * 6 / 8, rel=1e-2)
+    assert len(local["records"]) == 2 * 2  # 2 views x 2 objects
+
+    class Repaints(type(run)):
+        def render(self, camera, c2w, states, frame_index=None, outputs=None):
+            out = super().render(camera, c2w, states, frame_index, outputs)
+            return out | {"rgb": out["rgb"] + 0.02 * sum(states.values())}  # every pixel follows the states
+
+    leaky = evaluate_run(Repaints(ds, truth.renderer), ds, tmp_path / "leaky", truth, None, cfg)["locality"]
+    assert not leaky["all_local"]
+    assert leaky["objects"]["drawer"]["model_outside_x255"]["mean"] == pytest.approx(0.02 * 255, abs=0.5)

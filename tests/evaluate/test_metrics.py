@@ -56,8 +56,21 @@ def test_iou_hand_computed():
 
 def test_summarize_ignores_undefined_values():
     s = summarize([1.0, 3.0, float("nan"), None, float("inf")])
+    # t(0.975, 1) = 12.7062; sample std sqrt(2), standard error 1
+    assert s.pop("ci95") == pytest.approx([2.0 - 12.7062047, 2.0 + 12.7062047])
     assert s == {"mean": 2.0, "std": 1.0, "min": 1.0, "max": 3.0, "n": 2}
-    assert summarize([])["mean"] is None
+    assert summarize([])["mean"] is None and summarize([])["ci95"] is None
+
+
+def test_summarize_ci95_is_student_t():
+    # 1..5: mean 3, sample std sqrt(2.5), standard error 0.70711; t(0.975, 4) = 2.7764451 (tables)
+    lo, hi = summarize([1.0, 2.0, 3.0, 4.0, 5.0])["ci95"]
+    half = 2.7764451 * math.sqrt(2.5) / math.sqrt(5)
+    assert (lo, hi) == (pytest.approx(3.0 - half, abs=1e-6), pytest.approx(3.0 + half, abs=1e-6))
+    assert summarize([7.0])["ci95"] is None  # one value: no spread, no interval
+    assert summarize([4.0, 4.0, 4.0])["ci95"] == [4.0, 4.0]
+    wide = summarize([0.0, 10.0, 0.0, 10.0])["ci95"]
+    assert wide[0] < 5.0 - 5.0 < wide[1]  # spread that large cannot exclude 0 at n = 4
 
 
 def test_lpips_reports_status_not_a_made_up_value():

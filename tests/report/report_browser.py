@@ -14,6 +14,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 ARTIFACTS = REPO / "test-artifacts" / "report"
@@ -168,29 +169,58 @@ def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("li
     for k, m in enumerate(methods):
         run = res / "runs" / m
         run.mkdir(parents=True)
-        (run / "run.json").write_text(json.dumps({"method": m, "train_seconds": 150.0, "steps": 400 + k,
-                                                  "peak_memory_mib": 800.0, "params": {"total": 1_000_000 + k}}))
-        rows = ["wall_s,step,loss,eval_psnr"] + [f"{10 * i:.1f},{i * 10},{0.3 / (i + 1):.4f},"
+        (run / "run.json").write_text(json.dumps({"method": m, "status": "completed", "train_seconds": 150.0,
+                                                  "steps": 400 + k, "eval_psnr": 20.0 + k, "peak_memory_mib": 800.0,
+                                                  "params": {"total": 1_000_000 + k}}))
+        # the first method's config carries trust floors it passes; the others' have no trust section (an older
+        # run), so the TrustConfig defaults apply and flag their 400 steps as undertrained
+        config = {"method": m, "seed": 0}
+        if k == 0:
+            config["trust"] = {"min_steps": 100, "min_psnr": 15.0, "min_grounding_miou": 0.3}
+        (run / "config.yaml").write_text(yaml.safe_dump(config))
+        rows = ["wall_s,step,loss,eval_psnr"] + [f"{10 * i:.1f},{i * 50},{0.3 / (i + 1):.4f},"
                                                  f"{12 + i + k:.2f}" for i in range(8)]
         (run / "train_log.csv").write_text("\n".join(rows) + "\n")
         ev = res / "eval" / m
         views = []
-        for fid in test_ids:
+        for i, fid in enumerate(test_ids):
             _png(ev / "renders" / f"{fid}.png", rng.integers(0, 255, (ds.camera.height, ds.camera.width, 3),
                                                              dtype=np.uint8))
-            views.append({"frame": fid, "file_path": f"images/frame_{fid}.png", "psnr": 20.0 + k, "ssim": 0.7})
+            # every later method exactly 1 dB better on every view: LiveScene (first) is behind
+            views.append({"frame": fid, "file_path": f"images/frame_{fid}.png", "psnr": 20.0 + k + 0.5 * i,
+                          "ssim": 0.7})
         queries = []
-        for obj in objects:
+        for j, obj in enumerate(objects):
             _png(ev / "grounding" / f"probs_{obj}_{test_ids[0]}.png",
                  np.repeat(rng.integers(0, 255, (ds.camera.height, ds.camera.width, 1), dtype=np.uint8), 3, -1))
-            queries.append({"query": obj, "object": obj, "probs": {"iou": {"mean": 0.5}}})
+            # per-view IoUs that differ between methods in both directions: no measurable difference
+            ious = [0.5 + 0.1 * ((i + j + k) % 3 - 1) for i in range(len(test_ids))]
+            queries.append({"query": obj, "object": obj, "kind": "name",
+                            "probs": {"iou": {"mean": float(np.mean(ious))}, "per_view": ious, "frames": test_ids}})
+        records = []
+        for i, fid in enumerate(test_ids[:2]):
+            for c, states in enumerate([{"object0": 0.0, "object1": 1.0, "object2": 0.0},
+                                        {"object0": 1.0, "object1": 0.0, "object2": 0.5}]):
+                # LiveScene about 2 dB above the others on every unseen render: ahead
+                psnr = 18.0 - 2.0 * min(k, 1) + 0.3 * (i + c) + (0.2 if (i + c + k) % 2 else -0.2)
+                records.append({"frame": fid, "combination": c, "states": states, "unseen": True, "rendered": True,
+                                "psnr": psnr})
+            records.append({"frame": fid, "combination": 2, "states": {"object0": 0.5, "object1": 0.5,
+                                                                      "object2": 0.5},
+                            "unseen": False, "rendered": False, "psnr": None})
+        if k:  # a render the first method lacks: unpaired, left out
+            records.append({"frame": test_ids[-1], "combination": 0, "states": records[0]["states"], "unseen": True,
+                            "rendered": True, "psnr": 5.0})
         metrics = {"held_out": {"views": views, "psnr": {"mean": 20.0 + k}, "ssim": {"mean": 0.7}, "lpips": None,
-                                "lpips_status": "not available: torchvision is not installed", "fps": 2.0},
+                                "lpips_status": "not available: torchvision is not installed"},
                    "unseen_combinations": {"status": "computed", "psnr": {"mean": 18.0}, "psnr_moved": {"mean": 15.0},
-                                           "ssim": {"mean": 0.6}, "combinations": [{"unseen": True}]},
+                                           "ssim": {"mean": 0.6}, "records": records,
+                                           "combinations": [{"unseen": True}, {"unseen": True}, {"unseen": False}]},
                    "grounding": {"status": "computed", "threshold": 0.5, "sources": ["probs"], "queries": queries,
-                                 "miou_probs": 0.5}}
+                                 "miou_probs": 0.5, "miou_probs_name": 0.5}}
         (ev / "metrics.json").write_text(json.dumps(metrics))
+        (ev / "timings.json").write_text(json.dumps({"held_out": {"render_seconds": 1.2, "views": len(test_ids),
+                                                                  "fps": 2.5 + k}, "seconds": 3.0}))
     sweep = res / "sweep" / methods[0]
     entry = {}
     for obj in objects:
