@@ -27,6 +27,7 @@ SECTIONS = [
     ("sliders", "Object state sliders"),
     ("relevancy", "Relevancy maps"),
     ("unseen", "Unseen state combinations"),
+    ("locality", "Locality of control"),
     ("commands", "Language commands"),
     ("stability", "Stability checks"),
 ]
@@ -380,6 +381,32 @@ def section_unseen(sd: SceneData) -> str:
             + table(["method", "PSNR dB", "PSNR moved dB", "SSIM", "unseen combinations", "combinations"], rows))
 
 
+def section_locality(sd: SceneData) -> str:
+    rows = []
+    limit = None
+    for m in sd.methods:
+        loc = _metric(m, "locality")
+        if not isinstance(loc, dict) or loc.get("status") != "computed":
+            continue
+        limit = loc.get("outside_limit_x255")
+        for name, o in loc.get("objects", {}).items():
+            verdict = '<span class="ok">local</span>' if o.get("local") else '<span class="fail">not local</span>'
+            mean = {k: (o.get(k) or {}).get("mean") for k in ("model_outside_x255", "truth_outside_x255",
+                                                              "model_inside_x255", "truth_inside_x255")}
+            rows.append([escape(m.name), escape(name), *mean.values(), (o.get("model_outside_x255") or {}).get("n"),
+                         verdict])
+    if not rows:
+        return missing("No locality test: it needs the capture truth (no truth for this scene, or the evaluation "
+                       "skipped it).")
+    return (f"<p>Each object set to 0 and to 1 with every other object at the view's own state: mean change of the "
+            f"image (in 1/255 steps) outside the object's swept region (its truth pixels at every state, dilated "
+            f"2 px) and inside it. Control is local when the outside change stays at most {fmt(limit)} and the "
+            f"inside change is larger. The truth renderer's own change is shown for reference (cast shadows "
+            f"move outside the swept region).</p>"
+            + table(["method", "object", "model outside", "truth outside", "model inside", "truth inside", "views",
+                     "verdict"], rows))
+
+
 def section_commands(sd: SceneData) -> str:
     blocks = []
     for m in sd.methods:
@@ -450,7 +477,8 @@ def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
               "states": section_states(sd), "methods": section_methods(sd), "verdict": section_verdict(sd),
               "curves": section_curves(sd),
               "grid": section_grid(sd, views), "sliders": sliders, "relevancy": section_relevancy(sd),
-              "unseen": section_unseen(sd), "commands": section_commands(sd), "stability": section_stability(sd)}
+              "unseen": section_unseen(sd), "locality": section_locality(sd),
+              "commands": section_commands(sd), "stability": section_stability(sd)}
     body = head + nav + "".join(f'<section id="{k}"><h2>{escape(t)}</h2>{bodies[k]}</section>' for k, t in SECTIONS)
     script = SLIDER_SCRIPT % json.dumps(images) if images else ""
     return page(f"LiveScene report: {sd.scene}", body, script)

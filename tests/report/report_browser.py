@@ -217,7 +217,13 @@ def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("li
                                            "ssim": {"mean": 0.6}, "records": records,
                                            "combinations": [{"unseen": True}, {"unseen": True}, {"unseen": False}]},
                    "grounding": {"status": "computed", "threshold": 0.5, "sources": ["probs"], "queries": queries,
-                                 "miou_probs": 0.5, "miou_probs_name": 0.5}}
+                                 "miou_probs": 0.5, "miou_probs_name": 0.5},
+                   # the first method keeps its changes local; the others leak 3/255 onto the rest of the room
+                   "locality": {"status": "computed", "outside_limit_x255": 1.0, "objects": {
+                       obj: {"model_outside_x255": {"mean": 0.2 + 3.0 * min(k, 1), "n": 2},
+                             "truth_outside_x255": {"mean": 0.5, "n": 2},
+                             "model_inside_x255": {"mean": 30.0, "n": 2}, "truth_inside_x255": {"mean": 35.0, "n": 2},
+                             "local": k == 0} for obj in ds.objects}}}
         (ev / "metrics.json").write_text(json.dumps(metrics))
         (ev / "timings.json").write_text(json.dumps({"held_out": {"render_seconds": 1.2, "views": len(test_ids),
                                                                   "fps": 2.5 + k}, "seconds": 3.0}))

@@ -58,8 +58,10 @@ def test_page_in_chromium(tmp_path, tiny_dataset, chromium):
 def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     html = build_page(tmp_path, tiny_dataset.root).read_text()
     for section in ("rules", "timings", "poses", "states", "methods", "curves", "grid", "sliders", "relevancy",
-                    "unseen", "commands", "stability"):
+                    "unseen", "locality", "commands", "stability"):
         assert f'<section id="{section}">' in html
+    locality = html.split('<section id="locality">')[1].split("</section>")[0]
+    assert locality.count(">local<") == 3 and locality.count(">not local<") == 3  # 3 objects x 2 methods
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG
