@@ -4,7 +4,8 @@ For each method and language setting, a fresh subprocess builds the shared ``Tra
 dataset (generated once into ``--work``) and runs real training steps (ray batch, every level, every
 loss term, backward, finite checks, Adam). It prints one JSON line per configuration and a table:
 
-- ``step_ms``: median wall time of one step (CUDA: synchronised around each step);
+- ``step_ms``: median wall time of one step (CUDA: synchronised around each step), timed from step
+  ``--start-step`` on so the proposal schedule is that of a typical step;
 - ``rays_per_s``: batch rays / median step time;
 - ``ops``: aten ops dispatched by one step, forward and backward;
 - ``syncs``: host-device synchronisations of one step that is not a logging step
@@ -56,7 +57,7 @@ def measure_one(args: argparse.Namespace) -> dict:
     from stages.model.trainer import Trainer
 
     overrides = [f"train.threads={args.threads}", "train.eval_every=0", "train.checkpoint_every=0",
-                 f"train.max_steps={args.warmup + args.steps + 10}", *args.overrides]
+                 f"train.max_steps={args.start_step + args.warmup + args.steps + 10}", *args.overrides]
     if args.rays:
         overrides.append(f"train.batch_rays={args.rays}")
     cfg = load_config(args.preset, overrides, method=args.method, data=str(args.dataset),
@@ -65,6 +66,8 @@ def measure_one(args: argparse.Namespace) -> dict:
         trainer = Trainer(cfg, out, device=args.device, progress=False)
         device = trainer.device
         cuda = device.type == "cuda"
+
+        trainer.step = args.start_step  # the schedule (proposal updates) of a typical step, not of the first ones
 
         def step() -> None:
             trainer.train_step()
@@ -109,6 +112,9 @@ def main() -> int:
     p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
     p.add_argument("--steps", type=int, default=60, help="timed steps (the median is reported)")
     p.add_argument("--warmup", type=int, default=10)
+    p.add_argument("--start-step", type=int, default=300,
+                   help="step counter the timed steps start from (after cpu-demo's 200-step proposal warm-up, the "
+                        "proposal fields get gradients every 5th step)")
     p.add_argument("--language", choices=["both", "on", "off"], default="both")
     p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
     p.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "livescene-bench-demo")
@@ -132,7 +138,8 @@ def main() -> int:
             load0 = os.getloadavg()[0]
             cmd = [sys.executable, __file__, "--child", "--method", method, "--dataset", str(dataset), "--targets",
                    str(targets), "--preset", args.preset, "--device", args.device, "--threads", str(args.threads),
-                   "--rays", str(args.rays), "--steps", str(args.steps), "--warmup", str(args.warmup)]
+                   "--rays", str(args.rays), "--steps", str(args.steps), "--warmup", str(args.warmup),
+                   "--start-step", str(args.start_step)]
             cmd += ["--with-language"] if lang else []
             for o in args.overrides:
                 cmd += ["--set", o]

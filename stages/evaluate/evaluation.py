@@ -277,6 +277,7 @@ class Evaluator:
                                  f"queries use {self.grounder.encoder.name!r}")
         results: dict[str, Any] = {"status": "computed", "threshold": self.config.grounding_threshold,
                                    "sources": sources, "language_source": language_note, "queries": []}
+        decoded: dict[str, np.ndarray] = {}  # per view: the language decoded to object probabilities, query-free
         for q in tqdm(queries, desc="grounding queries", unit="query"):
             entry: dict[str, Any] = dict(q)
             weights = self.grounder.object_weights(q["query"])
@@ -291,8 +292,10 @@ class Evaluator:
                         rel = self.grounder.relevancy_from_probs(out["probs"], q["query"])
                     elif source == "language":
                         rel = self.grounder.relevancy_from_language(out["language"], q["query"])
-                    else:
-                        rel = self.grounder.relevancy_from_language_objects(out["language"], q["query"])
+                    else:  # relevancy_from_language_objects, with the query-independent decoding done once per view
+                        if frame.frame_id not in decoded:
+                            decoded[frame.frame_id] = self.grounder.probs_from_language(out["language"])
+                        rel = self.grounder.relevancy_from_probs(decoded[frame.frame_id], q["query"])
                     ious.append(iou(rel > self.config.grounding_threshold, truth))
                     frames.append(frame.frame_id)  # per-view IoUs pair up across methods by (query, frame)
                     if out_dir is not None and self.config.save_renders and len(ious) == 1:

@@ -76,14 +76,36 @@ def _stacks(encoding: KPlanesEncoding | MultiScaleKPlanes, k_only: bool = False)
             for g, stack in enumerate(grid.plane_groups) if not k_only or not grid.group_is_spatial(g)]
 
 
+class _NeighbourSquares(torch.autograd.Function):
+    """Per plane of a stack [G, C, H, W]: mean squared difference of neighbours along ``dim`` -> [G].
+
+    Its gradient is written directly (``2 / n * (d[k - 1] - d[k])``): autograd's version runs the two
+    slices' backward, each a full-size zero tensor, and this term ran every step over every plane.
+    """
+
+    @staticmethod
+    def forward(ctx, stack: torch.Tensor, dim: int) -> torch.Tensor:  # type: ignore[override]
+        d = torch.diff(stack, dim=dim)
+        ctx.save_for_backward(d)
+        ctx.dim, ctx.n = dim, d[0].numel()
+        return d.square().mean(dim=(1, 2, 3))
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:  # type: ignore[override]
+        (d,) = ctx.saved_tensors
+        gd = d * (grad.view(-1, 1, 1, 1) * (2.0 / ctx.n))
+        padded = F.pad(gd, (1, 1) if ctx.dim == 3 else (0, 0, 1, 1))
+        return -torch.diff(padded, dim=ctx.dim), None
+
+
 def plane_tv(encoding: KPlanesEncoding | MultiScaleKPlanes) -> torch.Tensor:
     """Mean over every plane of its mean squared neighbour difference; k planes only along their spatial axis (W)."""
     per_plane = []
     for stack, touches_k in _stacks(encoding):
         # a k plane (a, k) stores the spatial axis a along W, k along H
-        tv = (stack[..., :, 1:] - stack[..., :, :-1]).square().mean(dim=(1, 2, 3))
+        tv = _NeighbourSquares.apply(stack, 3)
         if not touches_k:
-            tv = tv + (stack[..., 1:, :] - stack[..., :-1, :]).square().mean(dim=(1, 2, 3))
+            tv = tv + _NeighbourSquares.apply(stack, 2)
         per_plane.append(tv)
     return torch.cat(per_plane).mean() if per_plane else _zero(encoding)
 

@@ -168,3 +168,24 @@ def test_render_fast_path_matches_full_render_within_its_bound(trained_run, monk
     full = run.render_rays(cam_origins, dirs, state)
     assert {"rgb", "depth", "accumulation", "probs"} <= set(full)
     assert np.abs(fast["rgb"] - full["rgb"]).max() <= bound + 1e-6
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (CI has none)")
+def test_cuda_training_steps_pass_sync_debug_mode_error(tiny_dataset, tmp_path, tiny_config):
+    targets = _language_targets(tmp_path / "targets.npz", tiny_dataset.objects)
+    cfg = tiny_config(tiny_dataset.root, "train.log_every=1000", steps=40)
+    cfg.language_targets = str(targets)
+    trainer = Trainer(cfg, tmp_path / "run", device="cuda", progress=False)
+    for _ in range(2):
+        trainer.train_step()
+        trainer.step += 1
+    trainer.flush_steps()
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")
+    try:
+        for _ in range(20):
+            trainer.train_step()
+            trainer.step += 1
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
+    assert all(r is not None for r in trainer.flush_steps())
