@@ -75,6 +75,19 @@ def grounding_items(metrics: dict | None, source: str = "probs") -> Items:
     return out
 
 
+def locality_items(metrics: dict | None) -> Items:
+    """Mean change outside the object's swept region (x255) per (view, object) of the locality test."""
+    out: Items = {}
+    locality = (metrics or {}).get("locality") or {}
+    if locality.get("status") != "computed":
+        return out
+    for r in locality.get("records") or []:
+        value = _finite(r.get("model_outside_x255"))
+        if value is not None:
+            out[(str(r.get("frame")), str(r.get("object")))] = value
+    return out
+
+
 @dataclass
 class MetricSpec:
     """One paired metric: what it is called, its unit and how to read its items from metrics.json."""
@@ -83,12 +96,15 @@ class MetricSpec:
     label: str
     unit: str
     items: Callable[[dict | None], Items]
+    higher_is_better: bool = True
 
 
 METRICS = [
     MetricSpec("held_out_psnr", "held-out PSNR per view", "dB", held_out_items),
     MetricSpec("unseen_psnr", "unseen-combination PSNR per (view, state vector)", "dB", unseen_items),
     MetricSpec("grounding_iou", "grounding IoU (probs) per (query, view)", "", grounding_items),
+    MetricSpec("locality_outside", "change outside the moved object's swept region per (view, object), lower "
+               "is better", "/255", locality_items, higher_is_better=False),
 ]
 
 
@@ -122,14 +138,16 @@ class PairedResult:
                 "rests_on_flagged_run": list(self.flagged), "statement": self.statement, "note": self.note}
 
 
-def verdict(n: int, ci95: list[float] | None) -> str:
+def verdict(n: int, ci95: list[float] | None, higher_is_better: bool = True) -> str:
     """Ahead / behind only when the 95% interval of the mean difference excludes 0."""
     if n == 0:
         return "no paired items"
+    above, below = ("LiveScene ahead", "LiveScene behind") if higher_is_better else ("LiveScene behind",
+                                                                                    "LiveScene ahead")
     if ci95 is not None and ci95[0] > 0:
-        return "LiveScene ahead"
+        return above
     if ci95 is not None and ci95[1] < 0:
-        return "LiveScene behind"
+        return below
     return f"no measurable difference (n={n})"
 
 
@@ -167,5 +185,6 @@ def compare(metrics: dict[str, dict | None], flags: dict[str, str]) -> list[Pair
                 a, b, note = {}, {}, "older evaluation without frame ids per grounding IoU, on other views"
             n, mean, ci = paired_difference(a, b)
             out.append(PairedResult(baseline=baseline, metric=spec.key, label=spec.label, unit=spec.unit, n=n,
-                                    mean=mean, ci95=ci, verdict=verdict(n, ci), flagged=on_flagged, note=note))
+                                    mean=mean, ci95=ci, verdict=verdict(n, ci, spec.higher_is_better),
+                                    flagged=on_flagged, note=note))
     return out

@@ -190,3 +190,19 @@ def test_curves_against_steps_and_wall_time(tmp_path, tiny_dataset):
     curves = html.split('<section id="curves">')[1].split("</section>")[0]
     assert "held-out error against steps" in curves and "held-out error against run time" in curves
     assert curves.count("<svg") == 4 and "training step" in curves and "training wall time (s)" in curves
+
+
+def test_locality_verdict_reads_lower_as_better():
+    from stages.report.paired import locality_items
+
+    def loc(outside: list[float]) -> dict:
+        return {"locality": {"status": "computed", "records": [
+            {"frame": f"f{i}", "object": "door", "model_outside_x255": v} for i, v in enumerate(outside)]}}
+
+    ours, theirs = loc([0.4, 0.5, 0.6, 0.5]), loc([10.2, 11.0, 9.8, 10.6])
+    assert locality_items(ours)[("f0", "door")] == 0.4
+    row = next(r for r in compare({"livescene": ours, "mk-planes": theirs}, {}) if r.metric == "locality_outside")
+    assert row.n == 4 and row.mean == pytest.approx(-9.9)
+    assert row.verdict == "LiveScene ahead"  # it leaves the rest of the room alone, the baseline does not
+    row = next(r for r in compare({"livescene": theirs, "mk-planes": ours}, {}) if r.metric == "locality_outside")
+    assert row.verdict == "LiveScene behind"
