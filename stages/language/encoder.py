@@ -110,24 +110,34 @@ class SentenceTransformerEncoder(CachedEncoder):
         if not (model_path / "modules.json").is_file():
             raise EncoderError(model_path, "no sentence-transformers model here (modules.json missing)",
                                "point --encoder-path at a folder saved by SentenceTransformer.save()")
-        try:
-            from sentence_transformers import SentenceTransformer
-        except ImportError as exc:
-            raise EncoderError(model_path, "sentence-transformers is not installed",
-                               "pip install sentence-transformers") from exc
-        self._model = SentenceTransformer(str(model_path), device=device)
-        # the method was renamed in sentence-transformers 5; accept both spellings
-        dim_of = getattr(self._model, "get_embedding_dimension", None) or self._model.get_sentence_embedding_dimension
-        self._dim = int(dim_of())
+        self._path, self._device = model_path, device
+        self._loaded = None
         super().__init__(cache_dir)
+
+    def _model(self):
+        """The network, loaded on first use: a run whose phrases are all in the cache never pays its ~10 s load."""
+        if self._loaded is None:
+            try:
+                from sentence_transformers import SentenceTransformer
+            except ImportError as exc:
+                raise EncoderError(self._path, "sentence-transformers is not installed",
+                                   "pip install sentence-transformers") from exc
+            self._loaded = SentenceTransformer(str(self._path), device=self._device)
+        return self._loaded
 
     @property
     def dim(self) -> int:
-        return self._dim
+        cached = next(iter(self._memory.values()), None)
+        if cached is not None:
+            return int(cached.shape[-1])
+        model = self._model()
+        # the method was renamed in sentence-transformers 5; accept both spellings
+        dim_of = getattr(model, "get_embedding_dimension", None) or model.get_sentence_embedding_dimension
+        return int(dim_of())
 
     def _encode_new(self, texts: list[str]) -> np.ndarray:
-        return self._model.encode(texts, normalize_embeddings=True, convert_to_numpy=True,
-                                  show_progress_bar=False, batch_size=64)
+        return self._model().encode(texts, normalize_embeddings=True, convert_to_numpy=True,
+                                    show_progress_bar=False, batch_size=64)
 
 
 def load_encoder(kind: str = DEFAULT_ENCODER, path: str | Path | None = None, device: str = "cpu",

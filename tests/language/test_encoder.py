@@ -114,3 +114,17 @@ def test_masked_object_crop():
     assert masked_object_crop(image, np.zeros_like(mask)) is None
     padded = masked_object_crop(image, mask, pad=0.5)
     assert padded.shape == (8, 19, 3)  # rows 2..6 padded by 2, columns 4..14 padded by 5 (left side clipped at 0)
+
+
+def test_minilm_loads_its_network_only_for_phrases_not_in_the_cache(tmp_path):
+    from stages.language.encoder import SentenceTransformerEncoder
+
+    first = SentenceTransformerEncoder(cache_dir=tmp_path)
+    assert first._loaded is None  # constructing costs nothing
+    vectors = first.encode(["open fridge", "closed drawer"])
+    assert first._loaded is not None
+    cached = SentenceTransformerEncoder(cache_dir=tmp_path)
+    np.testing.assert_array_equal(cached.encode(["closed drawer", "open fridge"]), vectors[::-1])
+    assert cached.dim == 384 and cached._loaded is None  # every phrase came from the cache
+    cached.encode(["a phrase never seen"])
+    assert cached._loaded is not None
