@@ -29,8 +29,8 @@ def _estimate_parser() -> argparse.ArgumentParser:
     p.add_argument("--vocab-tree", type=Path, help="COLMAP vocabulary tree: enables loop detection")
     p.add_argument("--threads", type=int, default=d.threads, help="CPU threads (-1 = all)")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed")
-    p.add_argument("--parallel-extraction", action="store_true",
-                   help="extract features on all --threads (faster, but runs are no longer bit-identical)")
+    p.add_argument("--parallel", "--parallel-extraction", dest="parallel_extraction", action="store_true",
+                   help="run COLMAP on all --threads (faster, but runs are no longer bit-identical)")
     p.add_argument("--min-registered", type=float, default=d.min_registered,
                    help="quality gate: minimum fraction of frames that must get a pose")
     p.add_argument("--camera-model", default=d.camera_model,

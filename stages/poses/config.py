@@ -33,8 +33,8 @@ class PosesConfig:
     seed: int = 0
     """Random seed for RANSAC and the mapper (results repeat for a fixed seed and thread count)."""
     deterministic: bool = True
-    """Extract features on one thread so that a fixed seed gives identical poses run after run (matching and
-    mapping still use ``threads``); False extracts in parallel, a little faster, results vary slightly."""
+    """Run COLMAP (extraction, matching, mapping) on one thread so that a fixed seed gives identical poses run
+    after run; False uses ``threads``, faster, and results vary in the last digits."""
     min_registered: float = 0.8
     """Quality gate: smallest accepted fraction of frames with a pose."""
     camera_model: str = "SIMPLE_RADIAL"

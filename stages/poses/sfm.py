@@ -49,16 +49,20 @@ def resolve_matcher(cfg: PosesConfig, n_images: int) -> str:
     return cfg.matcher
 
 
+def worker_threads(cfg: PosesConfig) -> int:
+    """COLMAP's threads: one in deterministic mode. Parallel extraction numbers images in the order threads
+    finish, and multi-threaded matching and bundle adjustment sum in varying order: two runs of the same
+    frames then differ in the last digits, and so does everything trained on those poses."""
+    return 1 if cfg.deterministic else cfg.threads
+
+
 def extract_features(cfg: PosesConfig, database: Path, image_dir: Path, names: list[str],
                      mask_dir: Path | None) -> None:
     """SIFT on every frame into ``database``; one shared camera (the frames come from one video)."""
     reader = pycolmap.ImageReaderOptions(camera_model=cfg.camera_model)
     if mask_dir is not None:
         reader.mask_path = str(mask_dir)
-    # COLMAP numbers images in the order extractor threads finish them; image ids steer pair order, RANSAC
-    # seeds and the mapper's choices, so parallel extraction makes runs differ. One thread keeps them identical.
-    threads = 1 if cfg.deterministic else cfg.threads
-    extraction = pycolmap.FeatureExtractionOptions(num_threads=threads, max_image_size=cfg.max_image_size,
+    extraction = pycolmap.FeatureExtractionOptions(num_threads=worker_threads(cfg), max_image_size=cfg.max_image_size,
                                                    use_gpu=False)
     extraction.sift.max_num_features = cfg.max_num_features
     pycolmap.extract_features(database_path=database, image_path=image_dir, image_names=names,
@@ -68,7 +72,7 @@ def extract_features(cfg: PosesConfig, database: Path, image_dir: Path, names: l
 
 def match_features(cfg: PosesConfig, database: Path, matcher: str) -> None:
     """Match and geometrically verify image pairs chosen by ``matcher``."""
-    matching = pycolmap.FeatureMatchingOptions(num_threads=cfg.threads, use_gpu=False)
+    matching = pycolmap.FeatureMatchingOptions(num_threads=worker_threads(cfg), use_gpu=False)
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = cfg.seed
     if matcher == "exhaustive":
@@ -77,7 +81,7 @@ def match_features(cfg: PosesConfig, database: Path, matcher: str) -> None:
                                   verification_options=verification, device=pycolmap.Device.cpu)
         return
     pairing = pycolmap.SequentialPairingOptions(overlap=cfg.sequential_overlap, quadratic_overlap=True,
-                                                num_threads=cfg.threads)
+                                                num_threads=worker_threads(cfg))
     if cfg.vocab_tree is not None:
         pairing.loop_detection = True
         pairing.vocab_tree_path = str(cfg.vocab_tree)
@@ -88,11 +92,11 @@ def match_features(cfg: PosesConfig, database: Path, matcher: str) -> None:
 def map_incrementally(cfg: PosesConfig, database: Path, image_dir: Path, models_dir: Path,
                       n_images: int) -> dict[int, pycolmap.Reconstruction]:
     """Incremental mapping with a fixed seed and thread count; returns every model built."""
-    options = pycolmap.IncrementalPipelineOptions(num_threads=cfg.threads, random_seed=cfg.seed,
+    options = pycolmap.IncrementalPipelineOptions(num_threads=worker_threads(cfg), random_seed=cfg.seed,
                                                   multiple_models=True,
                                                   # short sequences still get a model the gate can judge
                                                   min_model_size=min(10, max(2, n_images // 2)))
-    options.mapper.num_threads = cfg.threads
+    options.mapper.num_threads = worker_threads(cfg)
     options.mapper.random_seed = cfg.seed
     options.triangulation.random_seed = cfg.seed
     models_dir.mkdir(parents=True, exist_ok=True)
