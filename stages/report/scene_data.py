@@ -15,14 +15,19 @@ from typing import Any
 from stages.scene import InputError
 
 
-def read_json(path: Path) -> Any:
-    """A JSON file, or None when absent; a corrupt file is an input error naming it."""
+def _read_text_file(path: Path, parse: Any, what: str, errors: tuple[type[Exception], ...]) -> Any:
+    """``parse`` of a file's text, or None when absent; a corrupt file is an input error naming it."""
     if not path.is_file():
         return None
     try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(path, f"is not readable JSON ({exc})", "re-run the rule that writes it") from exc
+        return parse(path.read_text())
+    except (OSError, *errors) as exc:
+        raise InputError(path, f"is not readable {what} ({exc})", "re-run the rule that writes it") from exc
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file, or None when absent; a corrupt file is an input error naming it."""
+    return _read_text_file(path, json.loads, "JSON", (json.JSONDecodeError,))
 
 
 def read_csv_rows(path: Path) -> list[dict[str, str]]:
@@ -106,12 +111,7 @@ def read_yaml(path: Path) -> Any:
     """A YAML file, or None when absent; a corrupt file is an input error naming it."""
     import yaml
 
-    if not path.is_file():
-        return None
-    try:
-        return yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise InputError(path, f"is not readable YAML ({exc})", "re-run the rule that writes it") from exc
+    return _read_text_file(path, yaml.safe_load, "YAML", (yaml.YAMLError,))
 
 
 def state_errors_vs_truth(states_csv: Path, truth_csv: Path) -> dict[str, dict[str, float]]:

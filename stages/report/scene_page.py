@@ -230,28 +230,28 @@ def section_verdict(sd: SceneData) -> str:
             + table(["baseline", "paired metric", "n", "mean difference", "95% CI", "verdict"], rows))
 
 
-def section_curves(sd: SceneData) -> str:
-    series = []
+def _eval_series(sd: SceneData, axis: str) -> list[Series]:
+    """Held-out PSNR of every method against ``axis`` ("time": wall seconds, "step": steps), closed by run.json's
+    final evaluation."""
+    out = []
     for m in sd.methods:
-        xs, ys = list(m.curve[0]), list(m.curve[1])
-        final = (m.run or {}).get("eval_psnr"), (m.run or {}).get("train_seconds")
+        curve, end_key = (m.curve, "train_seconds") if axis == "time" else (m.step_curve, "steps")
+        xs, ys = list(curve[0]), list(curve[1])
+        final = (m.run or {}).get("eval_psnr"), (m.run or {}).get(end_key)
         if all(isinstance(v, (int, float)) for v in final) and (not xs or final[1] > xs[-1]):
             xs.append(float(final[1]))  # run.json's final evaluation closes the curve
             ys.append(float(final[0]))
         if xs:
-            series.append(Series(m.name, xs, ys))
+            out.append(Series(m.name, xs, ys))
+    return out
+
+
+def section_curves(sd: SceneData) -> str:
+    series = _eval_series(sd, "time")
     if not series:
         return missing("No periodic evaluation in any train_log.csv (training did not run or logged no eval_psnr).")
     loss = [Series(m.name, m.curve[2], m.curve[3]) for m in sd.methods if m.curve[2]]
-    by_step = []
-    for m in sd.methods:
-        xs, ys = list(m.step_curve[0]), list(m.step_curve[1])
-        final = (m.run or {}).get("eval_psnr"), (m.run or {}).get("steps")
-        if all(isinstance(v, (int, float)) for v in final) and (not xs or final[1] > xs[-1]):
-            xs.append(float(final[1]))  # run.json's final evaluation closes the curve
-            ys.append(float(final[0]))
-        if xs:
-            by_step.append(Series(m.name, xs, ys))
+    by_step = _eval_series(sd, "step")
     loss_by_step = [Series(m.name, m.step_curve[2], m.step_curve[3]) for m in sd.methods if m.step_curve[2]]
     return ("<p>Periodic held-out PSNR logged during training (higher PSNR = lower error), every method on one "
             "plot: against optimisation steps (the fair axis when every method trains the same steps), then "
