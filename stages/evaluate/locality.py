@@ -3,12 +3,14 @@
 For a held-out view and an object ``j``, the run renders the view with
 ``kappa_j = 0`` and ``kappa_j = 1`` (every other object at the view's own
 state). The truth renderer gives the object's *swept region*: its pixels at
-several states between 0 and 1, dilated by 2 px (edges are blurred by
-anti-aliasing and the camera). The mean absolute change of the model's image
+several states between 0 and 1, and the pixels its cast shadows fall on
+(where the renderer reports shadow casters), dilated by 2 px (edges are
+blurred by anti-aliasing and the camera). Moving the object legitimately
+changes exactly those pixels. The mean absolute change of the model's image
 outside that region (x255) must stay small (a state change that repaints
 the room is not control), and the change inside it must be visible. The
-truth renderer's own change outside the region is reported alongside: cast
-shadows move outside the swept region in the truth too.
+truth renderer's own change outside the region is reported alongside (about 0
+when the region holds every shadow).
 """
 
 from __future__ import annotations
@@ -34,13 +36,16 @@ RenderFn = Callable[[Frame, dict[str, float]], np.ndarray]
 
 
 def swept_region(truth: Any, frame: Frame, camera: Camera, name: str, base: dict[str, float]) -> np.ndarray:
-    """Pixels [H, W] the truth object ``name`` covers at any of SWEPT_STATES states, dilated by DILATE_PX."""
+    """Pixels [H, W] the truth object ``name`` or its cast shadows cover at any of SWEPT_STATES states, dilated."""
     tcam = truth.camera_for(camera.width, camera.height)
     c2w, _ = truth.pose_for(frame)
     obj = truth.object_ids[name]
     region = np.zeros((camera.height, camera.width), dtype=bool)
     for value in np.linspace(0.0, 1.0, SWEPT_STATES):
-        region |= truth.renderer.render(c2w, dict(base, **{name: float(value)}), camera=tcam)["ids"] == obj
+        out = truth.renderer.render(c2w, dict(base, **{name: float(value)}), camera=tcam)
+        region |= out["ids"] == obj
+        if "shadow_ids" in out:  # [lights, H, W]: which object casts the shadow on each pixel
+            region |= (np.asarray(out["shadow_ids"]) == obj).any(axis=0)
     size = 2 * DILATE_PX + 1
     return cv2.dilate(region.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
 

@@ -399,10 +399,10 @@ def section_locality(sd: SceneData) -> str:
         return missing("No locality test: it needs the capture truth (no truth for this scene, or the evaluation "
                        "skipped it).")
     return (f"<p>Each object set to 0 and to 1 with every other object at the view's own state: mean change of the "
-            f"image (in 1/255 steps) outside the object's swept region (its truth pixels at every state, dilated "
-            f"2 px) and inside it. Control is local when the outside change stays at most {fmt(limit)} and the "
-            f"inside change is larger. The truth renderer's own change is shown for reference (cast shadows "
-            f"move outside the swept region).</p>"
+            f"image (in 1/255 steps) outside the object's swept region (its truth pixels and cast shadows at every "
+            f"state, dilated 2 px) and inside it. Control is local when the outside change stays at most "
+            f"{fmt(limit)} and the inside change is larger. The truth renderer's own change is shown for "
+            f"reference.</p>"
             + table(["method", "object", "model outside", "truth outside", "model inside", "truth inside", "views",
                      "verdict"], rows))
 
