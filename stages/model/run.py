@@ -24,6 +24,7 @@ from .config import config_from_dict
 from .methods import SceneInfo, build_model
 from .rays import RayBundle
 from .scene_normalization import SceneNormalization, aabb_near_far
+from .trainer import MODEL_FORMAT
 
 States = Mapping[str, float] | Sequence[float] | np.ndarray | None
 IMAGE_OUTPUTS = ("rgb", "depth", "accumulation", "probs", "language")
@@ -164,4 +165,8 @@ def load_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
         raise InputError(path, "no trained model in this run folder",
                          "train one with `livescene train --data DS --out RUN` (or resume it to the end)")
     payload = torch.load(path, map_location="cpu", weights_only=True)
+    if payload.get("format") != MODEL_FORMAT:
+        raise InputError(path, f"model format {payload.get('format')} was written by an older version of the model "
+                         f"stage (this one reads format {MODEL_FORMAT})",
+                         "retrain the run (`livescene train ... --out NEW`), or load it with the version that wrote it")
     return LoadedRun(run_dir, payload, device)

@@ -37,7 +37,8 @@ from .methods import SceneInfo, build_model
 from .ray_dataset import RayDataset, frame_times, state_vector
 from .scene_normalization import SceneNormalization
 
-MODEL_FORMAT = 1
+MODEL_FORMAT = 2
+"""2: K-Planes planes stored stacked per shape (``plane_groups.N``, was ``planes.N``)."""
 LOSS_COLUMNS = [f.name for f in dataclasses.fields(LossWeights) if f.name != "repulsion_margin"]
 LOG_COLUMNS = ["wall_s", "step", "lr", "loss", *LOSS_COLUMNS, "eval_psnr", "eval_miou", "rays_per_s"]
 

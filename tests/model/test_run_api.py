@@ -45,3 +45,17 @@ def test_render_cli_writes_images(trained_run, tiny_dataset, tmp_path, capsys):
     matrix = " ".join(str(x) for x in np.asarray(tiny_dataset.frames[0].c2w).ravel())
     assert render_main(["--run", str(trained_run), "--pose-matrix", matrix, "--out", str(tmp_path / "m")]) == 0
     assert render_main(["--run", str(tmp_path / "none"), "--pose-matrix", matrix, "--out", str(tmp_path / "x")]) == 2
+
+
+def test_a_model_of_an_older_format_is_refused_with_the_fix(trained_run, tmp_path):
+    import shutil
+
+    import torch
+
+    old = tmp_path / "old"
+    shutil.copytree(trained_run, old)
+    payload = torch.load(old / "model.pt", weights_only=True)
+    payload["format"] = 1
+    torch.save(payload, old / "model.pt")
+    with pytest.raises(InputError, match=r"older version.*retrain"):
+        load_run(old)
