@@ -57,54 +57,37 @@ def read_benchmarks(folder: Path) -> dict[str, dict[str, float]]:
     return out
 
 
-def train_curve(path: Path) -> tuple[list[float], list[float], list[float], list[float]]:
-    """(wall_s, eval_psnr) where evaluated, and (wall_s, loss) of every logged step, from train_log.csv."""
+def _number(row: dict[str, str], key: str) -> float | None:
+    try:
+        return float(row.get(key) or "")
+    except ValueError:
+        return None
+
+
+def train_curve(path: Path, axis: str = "wall_s") -> tuple[list[float], list[float], list[float], list[float]]:
+    """(x, eval_psnr) where evaluated, and (x, loss) of every logged step, from train_log.csv; x is ``axis``.
+
+    ``axis`` "wall_s" plots error against run time; "step" against steps, the fair axis once every method
+    trains the same steps (wall time also measures the machine and its load).
+    """
     xs, ps, lx, ls = [], [], [], []
     for row in read_csv_rows(path):
-        try:
-            wall = float(row.get("wall_s", ""))
-        except ValueError:
+        x = _number(row, axis)
+        if x is None:
             continue
-        if row.get("eval_psnr"):
-            try:
-                xs.append(wall)
-                ps.append(float(row["eval_psnr"]))
-            except ValueError:
-                xs.pop()
-        if row.get("loss"):
-            try:
-                ls.append(float(row["loss"]))
-                lx.append(wall)
-            except ValueError:
-                pass
+        psnr, loss = _number(row, "eval_psnr"), _number(row, "loss")
+        if psnr is not None:
+            xs.append(x)
+            ps.append(psnr)
+        if loss is not None:
+            lx.append(x)
+            ls.append(loss)
     return xs, ps, lx, ls
 
 
 def train_curve_by_step(path: Path) -> tuple[list[float], list[float], list[float], list[float]]:
-    """(step, eval_psnr) where evaluated, and (step, loss) of every logged step, from train_log.csv.
-
-    With step-budgeted training (every method the same steps) this is the fair axis: wall time also
-    measures the machine and its load.
-    """
-    xs, ps, lx, ls = [], [], [], []
-    for row in read_csv_rows(path):
-        try:
-            step = float(row.get("step", ""))
-        except ValueError:
-            continue
-        try:
-            if row.get("eval_psnr"):
-                ps.append(float(row["eval_psnr"]))
-                xs.append(step)
-        except ValueError:
-            pass
-        try:
-            if row.get("loss"):
-                ls.append(float(row["loss"]))
-                lx.append(step)
-        except ValueError:
-            pass
-    return xs, ps, lx, ls
+    """``train_curve`` against steps."""
+    return train_curve(path, "step")
 
 
 def read_yaml(path: Path) -> Any:
