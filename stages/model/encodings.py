@@ -83,6 +83,9 @@ class KPlanesEncoding(nn.Module):
             # a plane is [C, res_b, res_a]: grid_sample reads the first coordinate along W (axis a), the second along H
             groups.setdefault((self.resolution[b], self.resolution[a], self.touches_non_spatial(a, b)), []).append(i)
         self.group_members = list(groups.values())
+        # per group, fixed at construction: the pairs it holds and whether they are all spatial (read every forward)
+        self._group_pairs = [[self.pairs[i] for i in members] for members in self.group_members]
+        self._group_spatial = [not non_spatial for (_, _, non_spatial) in groups]
         self.slot = {i: (g, j) for g, members in enumerate(self.group_members) for j, i in enumerate(members)}
         self.plane_groups = nn.ParameterList()
         for (h, w, non_spatial), members in groups.items():
@@ -99,10 +102,10 @@ class KPlanesEncoding(nn.Module):
         return a >= self.spatial_dims or b >= self.spatial_dims
 
     def group_pairs(self, g: int) -> list[tuple[int, int]]:
-        return [self.pairs[i] for i in self.group_members[g]]
+        return self._group_pairs[g]
 
     def group_is_spatial(self, g: int) -> bool:
-        return not self.touches_non_spatial(*self.pairs[self.group_members[g][0]])
+        return self._group_spatial[g]
 
     @property
     def planes(self) -> list[torch.Tensor]:

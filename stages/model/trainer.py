@@ -334,15 +334,16 @@ class Trainer:
         pending, self._pending = self._pending, []
         if not pending:
             return []
-        flags = torch.cat([torch.cat([p.terms_ok, p.grads_ok]) for p in pending]).cpu().tolist()
-        values = torch.stack([p.values for p in pending]).cpu().tolist() if \
-            len({len(p.values) for p in pending}) == 1 else [p.values.cpu().tolist() for p in pending]
+        # one transfer for the whole queue: per step its values, then its term and gradient flags
+        flat = torch.cat([torch.cat([p.values, p.terms_ok.float(), p.grads_ok.float()]) for p in pending])
+        flat = flat.cpu().tolist()
         results: list[dict[str, float] | None] = []
         at = 0
-        for p, vals in zip(pending, values, strict=True):
-            n_t, n_g = len(p.names), len(p.grad_names)
-            terms_ok, grads_ok = flags[at : at + n_t], flags[at + n_t : at + n_t + n_g]
-            at += n_t + n_g
+        for p in pending:
+            n_v, n_t, n_g = len(p.values), len(p.names), len(p.grad_names)
+            vals = flat[at : at + n_v]
+            terms_ok, grads_ok = flat[at + n_v : at + n_v + n_t], flat[at + n_v + n_t : at + n_v + n_t + n_g]
+            at += n_v + n_t + n_g
             if all(terms_ok) and all(grads_ok):
                 self.nonfinite_streak = 0
                 result = dict(zip(p.names, vals[:-1], strict=True))
