@@ -2,18 +2,23 @@
 
 from .config import FramesConfig
 from .errors import FrameSourceError
-from .extraction import extract_frames, frame_name
-from .frame_source import ImageFolderSource, SourceFrame, VideoSource, open_source
+from .extraction import DROPPED_CSV, extract_frames, frame_name
+from .frame_source import DroppedFrame, ImageFolderSource, SourceFrame, VideoSource, open_source
+from .integrity import bytes_problem, decode_image
 from .selection import WindowRule, sharpest_per_window
 from .sharpness import laplacian_variance
 
 __all__ = [
+    "DROPPED_CSV",
+    "DroppedFrame",
     "FrameSourceError",
     "FramesConfig",
     "ImageFolderSource",
     "SourceFrame",
     "VideoSource",
     "WindowRule",
+    "bytes_problem",
+    "decode_image",
     "extract_frames",
     "frame_name",
     "laplacian_variance",

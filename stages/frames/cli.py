@@ -16,7 +16,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="livescene frames",
         description="Extract frames from an OpenCV-readable video or an image folder into OUT/images/"
                     "frame_<source index>.png, keeping the sharpest frame (variance of the Laplacian) of each "
-                    "window; writes frames.csv (frame, source_index, timestamp, sharpness) and frames.json.")
+                    "window; writes frames.csv (frame, source_index, timestamp, sharpness) and frames.json. "
+                    "Damaged frames (truncated or corrupt image files, video frames FFmpeg reports damaged) are "
+                    "dropped with a warning naming each and listed in frames_dropped.csv.")
     p.add_argument("--video", type=Path, required=True, help="video file, or a folder of frames in playback order")
     p.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
     pick = p.add_mutually_exclusive_group()
@@ -28,6 +30,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, help="frame rate of an image folder, for timestamps (videos carry their own)")
     p.add_argument("--accept-truncated", action="store_true",
                    help="keep the frames that decode when a video ends before its declared length")
+    p.add_argument("--max-dropped", type=float, default=0.5, metavar="FRACTION",
+                   help="largest share of the source's frames that may be dropped as damaged before the stage "
+                        "refuses the source (default 0.5; 0 = refuse any damaged frame)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -41,17 +46,22 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError(Path("--stride"), f"stride {args.stride}", "give --stride >= 1")
         if any(f < 2 for f in args.downscale):
             raise InputError(Path("--downscale"), f"factors {args.downscale}", "give integer factors >= 2, e.g. 2 4")
+        if not 0 <= args.max_dropped <= 1:
+            raise InputError(Path("--max-dropped"), f"{args.max_dropped} is not a share between 0 and 1",
+                             "give --max-dropped between 0 (refuse any damaged frame) and 1")
         if args.fps is not None and not args.fps > 0:
             raise InputError(Path("--fps"), f"{args.fps} frames per second", "give a positive frame rate")
         from .extraction import extract_frames
 
         cfg = FramesConfig(source=args.video, out_dir=args.out, count=args.count, stride=args.stride,
                            downscale=tuple(sorted(set(args.downscale))), fps=args.fps,
-                           accept_truncated=args.accept_truncated, progress=not args.no_progress)
+                           accept_truncated=args.accept_truncated, max_dropped=args.max_dropped,
+                           progress=not args.no_progress)
         s = extract_frames(cfg)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"kept {s['n_frames']} of {s['decoded_frame_count']} frames ({s['selection']['rule']}), "
+    dropped = f", dropped {s['dropped_frame_count']} damaged (frames_dropped.csv)" if s["dropped_frame_count"] else ""
+    print(f"kept {s['n_frames']} of {s['decoded_frame_count']} frames ({s['selection']['rule']}){dropped}, "
           f"{s['width']}x{s['height']}, {s['timings']['total']:.1f} s -> {args.out}")
     return 0

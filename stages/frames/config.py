@@ -24,5 +24,8 @@ class FramesConfig:
     """Frame rate of an image folder (for timestamps); ignored for videos, which carry their own."""
     accept_truncated: bool = False
     """Keep the frames that decode when a video ends before its declared frame count (else an error)."""
+    max_dropped: float = 0.5
+    """Largest share of the source's frames that may be dropped as damaged (truncated or corrupt image files,
+    video frames FFmpeg reports damaged); more is refused, and so is a source with no whole frame left."""
     progress: bool = True
     """Show a tqdm progress bar over the source frames."""

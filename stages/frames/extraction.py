@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -16,11 +17,22 @@ from stages.scene import atomic_dir, write_json
 
 from .config import FramesConfig
 from .errors import FrameSourceError
-from .frame_source import REENCODE_FIX, SourceFrame, open_source
+from .frame_source import (
+    RECOPY_FIX,
+    REENCODE_FIX,
+    DroppedFrame,
+    ImageFolderSource,
+    SourceFrame,
+    VideoSource,
+    open_source,
+)
 from .selection import WindowRule
 from .sharpness import laplacian_variance
 
-STAGE_VERSION = "1"
+STAGE_VERSION = "2"
+DROPPED_CSV = "frames_dropped.csv"
+"""Frames left out as damaged, one row each (frames.csv lists only the frames written to images/)."""
+DROPPED_COLUMNS = ["frame", "source_index", "timestamp", "source_file", "problem"]
 
 
 def frame_name(source_index: int) -> str:
@@ -33,18 +45,57 @@ def _write_png(path: Path, image: np.ndarray) -> None:
         raise OSError(f"could not write {path}")
 
 
+def _warn(message: str) -> None:
+    tqdm.write(f"warning: {message}", file=sys.stderr)
+
+
+def _label(source: VideoSource | ImageFolderSource, frame: DroppedFrame) -> str:
+    """How a dropped frame is named inside a message about the whole source."""
+    return frame.source_file.name if frame.source_file != source.path else f"frame {frame.source_index}"
+
+
+def _refusal(source: VideoSource | ImageFolderSource, dropped: list[DroppedFrame], n_read: int, n_total: int,
+             cfg: FramesConfig, none_left: bool) -> FrameSourceError:
+    """The error for a source with too many damaged frames (or none whole), naming them."""
+    unit = "images" if source.kind == "images" else "video frames"
+    shown = "; ".join(f"{_label(source, d)}: {d.problem}" for d in dropped[:5])
+    more = f"; and {len(dropped) - 5} more" if len(dropped) > 5 else ""
+    checked = "" if n_read >= n_total else f" (stopped after checking {n_read})"
+    if none_left:
+        problem = f"none of the {n_read} {unit} read is whole, all {len(dropped)} are damaged: {shown}{more}"
+    else:
+        problem = (f"{len(dropped)} of the {n_total} {unit} are damaged{checked}, more than the "
+                   f"{cfg.max_dropped:.0%} that --max-dropped allows: {shown}{more}")
+    fix = RECOPY_FIX if source.kind == "images" else REENCODE_FIX
+    if not none_left:
+        fix += f"; or raise --max-dropped (now {cfg.max_dropped:g}) to go on with the whole ones"
+    path = dropped[0].source_file if len(dropped) == 1 else source.path
+    return FrameSourceError(path, problem, fix)
+
+
 def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
     """Write ``cfg.out_dir`` atomically and return the content of frames.json.
 
     One streaming pass: every source frame is decoded once and scored; the
     best frame of the current window is held in memory until the window
     closes, so memory stays at two frames whatever the video length.
+
+    A damaged frame (truncated or corrupt image file, video frame FFmpeg
+    reports damaged or cannot decode) is left out with a warning naming it
+    and listed in frames_dropped.csv and frames.json; more than
+    ``cfg.max_dropped`` of the source damaged, or no whole frame at all, is
+    an error naming them.
     """
     t_start = time.perf_counter()
     source = open_source(cfg.source, cfg.fps)
     rule = WindowRule.from_options(source.n_declared, cfg.count, cfg.stride)
+    if source.remarks:
+        _warn(f"{source.path}: FFmpeg printed while opening it (or counting its frames): "
+              f"{' | '.join(source.remarks[:3])}")
     rows: list[dict[str, Any]] = []
-    all_sharpness: list[float] = []
+    dropped: list[DroppedFrame] = []
+    allowed = math.floor(cfg.max_dropped * rule.n_total + 1e-9)
+    all_sharpness: list[float | None] = []
     size: tuple[int, int] | None = None
 
     with atomic_dir(cfg.out_dir) as out:
@@ -69,6 +120,17 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             for frame in source:
                 if frame.position >= rule.n_total:  # more frames than the container declared
                     break
+                n_read += 1
+                bar.update()
+                if isinstance(frame, DroppedFrame):
+                    dropped.append(frame)
+                    all_sharpness.append(None)
+                    _warn(f"{frame.where()}: {frame.problem}; dropped (listed in {DROPPED_CSV})")
+                    if len(dropped) > allowed:
+                        raise _refusal(source, dropped, n_read, rule.n_total, cfg, none_left=False)
+                    continue
+                if frame.remarks:
+                    _warn(f"{frame.where}: the decoder printed {' | '.join(frame.remarks[:3])!r}; kept")
                 score = laplacian_variance(frame.image)
                 all_sharpness.append(score)
                 size = (frame.image.shape[1], frame.image.shape[0])
@@ -78,12 +140,12 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
                     best = None
                 if best is None or score > best[1]:
                     best = (window, score, frame)
-                n_read += 1
-                bar.update()
         if best is not None:
             keep(best[2], best[1])
         if n_read == 0:
             raise FrameSourceError(source.path, "no frame could be decoded", REENCODE_FIX)
+        if not rows:
+            raise _refusal(source, dropped, n_read, rule.n_total, cfg, none_left=True)
         if n_read < rule.n_total and not cfg.accept_truncated:
             raise FrameSourceError(
                 source.path,
@@ -93,6 +155,10 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
 
         table = pd.DataFrame(rows, columns=["frame", "source_index", "timestamp", "sharpness"])
         table.to_csv(out / "frames.csv", index=False)
+        dropped_rows = [{"frame": frame_name(d.source_index), "source_index": d.source_index,
+                         "timestamp": d.timestamp, "source_file": str(d.source_file), "problem": d.problem}
+                        for d in dropped]
+        pd.DataFrame(dropped_rows, columns=DROPPED_COLUMNS).to_csv(out / DROPPED_CSV, index=False)
         summary = {
             "stage": "frames",
             "stage_version": STAGE_VERSION,
@@ -102,13 +168,16 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "source_frame_count": rule.n_total,
             "decoded_frame_count": n_read,
             "truncated": n_read < rule.n_total,
+            "dropped_frame_count": len(dropped),
+            "max_dropped": cfg.max_dropped,
+            "dropped": [{k: v for k, v in r.items() if k != "timestamp"} for r in dropped_rows],
             "width": size[0] if size else None,
             "height": size[1] if size else None,
             "n_frames": len(rows),
             "selection": {"count": cfg.count, "stride": cfg.stride, "rule": rule.describe(),
                           "score": "variance of the Laplacian of the grey image"},
             "downscale": {f"images_{f}": f for f in cfg.downscale},
-            "sharpness_all": [round(s, 4) for s in all_sharpness],
+            "sharpness_all": [None if s is None else round(s, 4) for s in all_sharpness],
             "timings": {"total": time.perf_counter() - t_start},
         }
         write_json(out / "frames.json", summary)

@@ -3,6 +3,11 @@
 The source index is what later stages key on (states, key frames, masks), so
 it is the frame's position in the *source*: its decode position in a video,
 or the number in an image's name (``frame_00012.png`` -> 12) for a folder.
+
+A frame that is damaged (a truncated or corrupt image file, a video frame
+FFmpeg reports as damaged or cannot decode) comes out as a ``DroppedFrame``
+at its place in the sequence, so the caller can list it by name and the
+windows and source indices of the other frames stay where they were.
 """
 
 from __future__ import annotations
@@ -18,11 +23,16 @@ import numpy as np
 from stages.scene import frame_id_of
 
 from .errors import FrameSourceError
+from .integrity import DecoderReport, StderrCapture, decode_image
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 REENCODE_FIX = ("check that the file plays and was copied completely; re-encode it "
                 "(`ffmpeg -i VIDEO -c:v libx264 -pix_fmt yuv420p fixed.mp4`) or extract its frames into an "
                 "image folder and pass that folder as --video")
+RECOPY_FIX = ("copy the images again from the camera or phone (these copies are incomplete or damaged), "
+              "or delete the broken ones")
+MAX_CONSECUTIVE_FAILURES = 16
+"""A video read that fails is retried this many times in a row before the rest of the video counts as missing."""
 
 
 @dataclass
@@ -37,6 +47,35 @@ class SourceFrame:
     """Seconds from the start of the video (NaN for an image folder without --fps)."""
     image: np.ndarray
     """BGR uint8 H x W x 3."""
+    remarks: tuple[str, ...] = ()
+    """What the decoder printed about this frame without calling it damaged (passed on as a warning)."""
+    where: str = ""
+    """The image file, or ``video: frame N``, for messages."""
+
+
+@dataclass
+class DroppedFrame:
+    """A source frame that is damaged or cannot be decoded: listed by name, never kept."""
+
+    position: int
+    """Rank in playback order (0-based)."""
+    source_index: int
+    """Index of the frame in the source (the name it would have had: ``frame_<index>.png``)."""
+    timestamp: float
+    """Seconds from the start (NaN when unknown)."""
+    source_file: Path
+    """The image file, or the video file the frame belongs to."""
+    problem: str
+    """What is wrong with it, in words."""
+    in_video: bool = False
+    """A frame of a video (``source_file`` is the video), not an image file of a folder."""
+
+    def where(self) -> str:
+        """``path`` for an image; ``path: frame N (t=S s)`` for a video frame."""
+        if not self.in_video:
+            return str(self.source_file)
+        stamp = f" (t={self.timestamp:.2f} s)" if math.isfinite(self.timestamp) else ""
+        return f"{self.source_file}: frame {self.source_index}{stamp}"
 
 
 class VideoSource:
@@ -51,10 +90,15 @@ class VideoSource:
         if self.path.stat().st_size == 0:
             raise FrameSourceError(self.path, "the video file is empty (0 bytes)",
                                    "copy the video again from the recording device")
-        capture = cv2.VideoCapture(str(self.path))
+        with StderrCapture() as stderr:
+            capture, text = stderr.call(lambda: cv2.VideoCapture(str(self.path)))
+        said = DecoderReport.from_text(text)
+        lines = said.damage + said.remarks
+        self.remarks: tuple[str, ...] = lines  # what FFmpeg printed while opening it (warned of, naming the video)
         if not capture.isOpened():
             raise FrameSourceError(self.path, "OpenCV cannot open it as a video (unknown format, corrupt data, "
-                                   "or an mp4 cut off before its index)", REENCODE_FIX)
+                                   "or an mp4 cut off before its index)"
+                                   + (f"; FFmpeg said {said.summary(lines)}" if lines else ""), REENCODE_FIX)
         self.fps = float(capture.get(cv2.CAP_PROP_FPS))
         if not (math.isfinite(self.fps) and self.fps > 0):
             self.fps = float("nan")
@@ -66,33 +110,81 @@ class VideoSource:
             raise FrameSourceError(self.path, "the video holds no frames that OpenCV can read", REENCODE_FIX)
 
     def _count_frames(self) -> int:
-        capture = cv2.VideoCapture(str(self.path))
-        n = 0
-        while capture.grab():
-            n += 1
-        capture.release()
+        """Frames of a stream that declares no length; what FFmpeg prints meanwhile joins ``self.remarks``
+        (the frames it is about are told apart when they are decoded)."""
+
+        def count() -> int:
+            capture = cv2.VideoCapture(str(self.path))
+            n = 0
+            while capture.grab():
+                n += 1
+            capture.release()
+            return n
+
+        with StderrCapture() as stderr:
+            n, text = stderr.call(count)
+        said = DecoderReport.from_text(text)
+        self.remarks = tuple(dict.fromkeys(self.remarks + said.damage + said.remarks))
         return n
 
-    def __iter__(self) -> Iterator[SourceFrame]:
-        capture = cv2.VideoCapture(str(self.path))
+    def _open_for_decoding(self) -> cv2.VideoCapture:
+        """One decoding thread, so that what FFmpeg prints while a frame is read is about that frame (with
+        frame threads, a damaged frame is reported while the one before it is returned)."""
+        n_threads = getattr(cv2, "CAP_PROP_N_THREADS", None)
+        with StderrCapture() as stderr:  # what opening prints was already said (self.remarks) when checked
+            if n_threads is not None:
+                capture, _ = stderr.call(lambda: cv2.VideoCapture(str(self.path), cv2.CAP_ANY, [n_threads, 1]))
+                if capture.isOpened():
+                    return capture
+                capture.release()
+            return stderr.call(lambda: cv2.VideoCapture(str(self.path)))[0]
+
+    def __iter__(self) -> Iterator[SourceFrame | DroppedFrame]:
+        """Frames in decode order. A read that fails is retried; when a later read succeeds, the failed
+        positions are dropped frames; when reads keep failing, the video ends there (the caller compares the
+        count with the declared length). A frame FFmpeg reports damaged data for is dropped too."""
+        capture = self._open_for_decoding()
         previous = -1.0
         position = 0
+        failed: list[tuple[int, str]] = []  # (position, what FFmpeg said) of reads not yet followed by a success
         try:
-            while True:
-                ok, image = capture.read()
-                if not ok or image is None:
-                    return
-                stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
-                # the container's clock when it is sane (variable frame rate phones), else index / fps
-                if not (math.isfinite(stamp) and stamp >= 0 and stamp > previous):
-                    stamp = position / self.fps if math.isfinite(self.fps) else float("nan")
-                previous = stamp
-                if image.ndim == 2:
-                    image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-                yield SourceFrame(position=position, source_index=position, timestamp=stamp, image=image)
-                position += 1
+            with StderrCapture() as stderr:
+                while True:
+                    (ok, image), text = stderr.call(capture.read)
+                    report = DecoderReport.from_text(text)
+                    if not ok or image is None:
+                        failed.append((position, report.summary(report.damage + report.remarks)))
+                        position += 1
+                        if len(failed) >= MAX_CONSECUTIVE_FAILURES or position >= self.n_declared:
+                            return
+                        continue
+                    for pos, said in failed:
+                        yield DroppedFrame(position=pos, source_index=pos, timestamp=self._clock(pos),
+                                           source_file=self.path, in_video=True,
+                                           problem="OpenCV could not decode this frame"
+                                                   + (f" (FFmpeg said {said})" if said else ""))
+                    failed = []
+                    stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
+                    # the container's clock when it is sane (variable frame rate phones), else index / fps
+                    if not (math.isfinite(stamp) and stamp >= 0 and stamp > previous):
+                        stamp = self._clock(position)
+                    previous = stamp
+                    if report.damage:
+                        yield DroppedFrame(position=position, source_index=position, timestamp=stamp,
+                                           source_file=self.path, in_video=True,
+                                           problem=f"FFmpeg reported damaged data while decoding it: "
+                                                   f"{report.summary(report.damage)}")
+                    else:
+                        if image.ndim == 2:
+                            image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+                        yield SourceFrame(position=position, source_index=position, timestamp=stamp, image=image,
+                                          remarks=report.remarks, where=f"{self.path}: frame {position}")
+                    position += 1
         finally:
             capture.release()
+
+    def _clock(self, position: int) -> float:
+        return position / self.fps if math.isfinite(self.fps) else float("nan")
 
 
 class ImageFolderSource:
@@ -116,22 +208,33 @@ class ImageFolderSource:
             self.files = sorted(files)
             self.indices = list(range(len(files)))
         self.numbered = numbered
+        self.remarks: tuple[str, ...] = ()
         self.fps = float(fps) if fps else float("nan")
         self.n_declared = len(self.files)
 
-    def __iter__(self) -> Iterator[SourceFrame]:
+    def __iter__(self) -> Iterator[SourceFrame | DroppedFrame]:
+        """Each file is read once, checked from its bytes (empty, truncated JPEG, damaged PNG) and decoded
+        once with the decoder's stderr captured; a file that fails any of this is a DroppedFrame."""
         shape = None
-        for position, (path, index) in enumerate(zip(self.files, self.indices, strict=True)):
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if image is None:
-                raise FrameSourceError(path, "the image cannot be read (corrupt or not an image)",
-                                       "replace or delete this file")
-            if shape is None:
-                shape = image.shape
-            elif image.shape != shape:
-                raise FrameSourceError(path, f"the image is {image.shape[1]}x{image.shape[0]} but earlier frames "
-                                       f"are {shape[1]}x{shape[0]}", "give frames of one camera at one size")
-            yield SourceFrame(position=position, source_index=index, timestamp=index / self.fps, image=image)
+        with StderrCapture() as stderr:
+            for position, (path, index) in enumerate(zip(self.files, self.indices, strict=True)):
+                stamp = index / self.fps
+                try:
+                    data = path.read_bytes()
+                except OSError as exc:
+                    yield DroppedFrame(position, index, stamp, path, f"the file cannot be read ({exc.strerror})")
+                    continue
+                image, problem, remarks = decode_image(data, stderr)
+                if image is None:
+                    yield DroppedFrame(position, index, stamp, path, problem or "the image cannot be decoded")
+                    continue
+                if shape is None:
+                    shape = image.shape
+                elif image.shape != shape:
+                    raise FrameSourceError(path, f"the image is {image.shape[1]}x{image.shape[0]} but earlier "
+                                           f"frames are {shape[1]}x{shape[0]}", "give frames of one camera at one size")
+                yield SourceFrame(position=position, source_index=index, timestamp=stamp, image=image,
+                                  remarks=remarks, where=str(path))
 
 
 def open_source(path: Path, fps: float | None = None) -> VideoSource | ImageFolderSource:

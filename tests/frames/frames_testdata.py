@@ -41,3 +41,48 @@ def write_video(path: Path, frames: list[np.ndarray], fourcc: str = "mp4v", fps:
 
 # stride 5 over 20 frames: windows [0-4], [5-9], [10-14], [15-19]; one sharp frame in each, not at a window edge
 SHARP = {3, 6, 12, 19}
+
+
+def encoded(image: np.ndarray, ext: str) -> bytes:
+    """A real image file's bytes (``.jpg`` or ``.png``), as cv2.imwrite would write them."""
+    ok, buf = cv2.imencode(ext, image)
+    assert ok
+    return buf.tobytes()
+
+
+def truncated_jpeg(image: np.ndarray, keep: int = 3000) -> bytes:
+    """The first ``keep`` bytes of a whole JPEG: a copy cut off mid-transfer (the case measured in issue 17)."""
+    data = encoded(image, ".jpg")
+    assert len(data) > keep + 500, "the test JPEG must be larger than the cut"
+    return data[:keep]
+
+
+def jpeg_with_corrupt_scan(image: np.ndarray) -> bytes:
+    """A JPEG whose entropy-coded data is overwritten in the middle but which keeps its end marker:
+    libjpeg decodes it and only prints "Corrupt JPEG data" on stderr."""
+    data = bytearray(encoded(image, ".jpg"))
+    mid = len(data) // 2
+    data[mid:mid + 40] = b"\xff" * 40
+    return bytes(data)
+
+
+def png_with_broken_tail(image: np.ndarray) -> bytes:
+    """A whole PNG less the last 3 bytes of its IEND chunk's CRC: the chunk runs past the end of the file."""
+    return encoded(image, ".png")[:-3]
+
+
+def png_with_bad_crc(image: np.ndarray) -> bytes:
+    """A whole-length PNG with one byte of its image data flipped: the IDAT chunk's CRC no longer matches."""
+    data = bytearray(encoded(image, ".png"))
+    idat = data.find(b"IDAT")
+    data[idat + 4 + 20] ^= 0x5A
+    return bytes(data)
+
+
+def damage_middle(path: Path, out: Path, fill: bytes, length: int = 200) -> Path:
+    """A copy of a video with ``length`` bytes in the middle of the file overwritten by ``fill``."""
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    data[mid:mid + length] = fill * length
+    out.write_bytes(bytes(data))
+    return out

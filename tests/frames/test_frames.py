@@ -124,6 +124,7 @@ def test_truncated_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
     code, err = run_cli(capsys, "--video", str(cut), "--out", str(tmp_path / "a"))
     assert code == 2 and "cut.mp4" in err and "cut off before its index" in err
+    assert "FFmpeg said \"[mov,mp4,m4a,3gp,3g2,mj2] moov atom not found\"" in err  # its own words, attributed
     # an MJPG avi cut short still opens and declares 20 frames, but decoding stops early
     avi = write_video(tmp_path / "whole.avi", make_frames(20, SHARP), fourcc="MJPG")
     cut_avi = tmp_path / "cut.avi"
@@ -132,11 +133,16 @@ def test_truncated_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     code, err = run_cli(capsys, "--video", str(cut_avi), "--out", str(out))
     assert code == 2 and "cut.avi: decoding stopped after" in err and "of the 20 frames" in err
     assert "--accept-truncated" in err and not out.exists()
-    code, _ = run_cli(capsys, "--video", str(cut_avi), "--out", str(out), "--accept-truncated")
+    code, err = run_cli(capsys, "--video", str(cut_avi), "--out", str(out), "--accept-truncated")
     assert code == 0
     meta = json.loads((out / "frames.json").read_text())
     assert meta["truncated"] and 0 < meta["decoded_frame_count"] < 20
-    assert len(read_table(out)) == meta["decoded_frame_count"]
+    # the last frame is cut in half: FFmpeg reports it ("overread"), so it is dropped by name, not kept grey
+    dropped = pd.read_csv(out / "frames_dropped.csv")
+    last = meta["decoded_frame_count"] - 1
+    assert dropped["source_index"].tolist() == [last] and "FFmpeg reported damaged data" in dropped["problem"][0]
+    assert f"cut.avi: frame {last}" in err and "dropped" in err
+    assert read_table(out)["source_index"].tolist() == list(range(last))
 
 
 def test_bad_options(tmp_path: Path, blur_video: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -144,9 +150,7 @@ def test_bad_options(tmp_path: Path, blur_video: Path, capsys: pytest.CaptureFix
     assert code == 2 and "--count" in err
     code, err = run_cli(capsys, "--video", str(blur_video), "--out", str(tmp_path / "o"), "--downscale", "1")
     assert code == 2 and "--downscale" in err
-    folder = tmp_path / "bad"
-    folder.mkdir()
-    cv2.imwrite(str(folder / "frame_00000.png"), textured_frame(0))
-    (folder / "frame_00001.png").write_bytes(b"not a png")
-    code, err = run_cli(capsys, "--video", str(folder), "--out", str(tmp_path / "o"))
-    assert code == 2 and "frame_00001.png: the image cannot be read" in err
+    for share in ("-0.1", "1.5"):
+        code, err = run_cli(capsys, "--video", str(blur_video), "--out", str(tmp_path / "o"), "--max-dropped", share)
+        assert code == 2 and "--max-dropped" in err and "fix:" in err
+    assert not (tmp_path / "o").exists()
