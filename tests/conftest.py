@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from chromium_page import Chromium
 
 from stages.scene import Camera, Frame, SceneDataset, label_map_to_onehot, look_at, write_mask, write_scene
 
@@ -42,3 +44,17 @@ def make_tiny_dataset(root: Path, n_frames: int = 6, n_objects: int = 3, width: 
 @pytest.fixture
 def tiny_dataset(tmp_path: Path) -> SceneDataset:
     return make_tiny_dataset(tmp_path / "scene")
+
+
+@pytest.fixture
+def chromium(tmp_path: Path):
+    """A headless Chromium page (report pages are loaded in it); skipped where Debian's chromium is missing."""
+    binary = shutil.which("chromium") or shutil.which("chromium-browser")
+    if binary is None:
+        pytest.skip("Debian chromium is not installed (apt-get install chromium)")
+    browser = Chromium(binary, tmp_path / "chromium-profile")
+    try:
+        browser.open_page()
+        yield browser
+    finally:
+        browser.close()

@@ -44,6 +44,7 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
 
     i = sub.add_parser("index", help="write reports/index.html from the scenes' summaries")
     i.add_argument("--summaries", nargs="+", required=True, help="summary.json of each scene")
+    i.add_argument("--pending", default="", help="comma-separated scenes of the sheet without a page yet")
     i.add_argument("--out", required=True, help="index HTML to write")
     return parser
 
@@ -93,6 +94,6 @@ def _index(args: argparse.Namespace) -> int:
 
     from .index_page import build_index
 
-    write_text(Path(args.out), build_index(args.summaries))
+    write_text(Path(args.out), build_index(args.summaries, pending=[s for s in args.pending.split(',') if s]))
     print(args.out)
     return 0

@@ -11,8 +11,9 @@ from stages.scene import InputError
 from .html_parts import fmt, page, table
 
 
-def build_index(summary_files: list[str | Path]) -> str:
-    """HTML of reports/index.html from the scenes' summary.json files."""
+def build_index(summary_files: list[str | Path], pending: list[str] | None = None) -> str:
+    """HTML of reports/index.html from the scenes' summary.json files; ``pending`` names the sheet's scenes
+    that have no page yet (a run restricted with ``--config only=...``)."""
     rows = []
     for path in summary_files:
         path = Path(path)
@@ -27,10 +28,15 @@ def build_index(summary_files: list[str | Path]) -> str:
                      escape(", ".join(s.get("objects", []))), s.get("frames"), s.get("registered_fraction"),
                      methods or "–", _verdicts(s.get("verdict") or []),
                      escape(", ".join(s.get("skipped", [])) or "none"), s.get("job_seconds")])
+    waiting = ""
+    if pending:
+        names = ", ".join(escape(n) for n in pending)
+        waiting = (f"<p>Scenes of the sheet without a page yet: {names}. Build one with "
+                   f"<code>snakemake --cores 2 --config only={escape(pending[0])}</code>.</p>")
     body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline. A flagged run "
             "(&#9888;) is under its trust floors: its numbers are not results.</p>"
             + table(["scene", "objects", "frames", "poses registered", "methods (held-out)",
-                     "LiveScene vs baselines (paired, 95% CI)", "rules skipped", "job seconds"], rows))
+                     "LiveScene vs baselines (paired, 95% CI)", "rules skipped", "job seconds"], rows) + waiting)
     return page("LiveScene reports", body)
 
 

@@ -1,24 +1,37 @@
-"""The whole workflow on the tiny synthetic capture (seconds of training): every stage runs, the
-report pages hold real numbers, a second run has nothing to do, and `snakemake --report` works."""
+"""The whole workflow on the tiny synthetic capture (seconds of training), run twice in one DAG: as a
+synthetic scene with truth, and as a user's own capture (its video, masks, key frames, names and prompts as
+files, no truth). Every stage runs, both report pages hold real numbers and load in Chromium, a second run
+has nothing to do, one scene can be built on its own, and `snakemake --report` works."""
 
 from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 import zipfile
 
 import pytest
 
+USER_COMMANDS = ["close everything", "open the cupboard"]  # a synonym from prompts.yaml
+
 
 @pytest.mark.slow
-def test_tiny_scene_end_to_end(workflow_copy):
+def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     wf = workflow_copy
+    own = tmp_path / "own-capture"  # what a user brings: a video and separate files, no truth
+    subprocess.run([sys.executable, "-m", "stages.cli", "capture", "--spec", str(wf.root / "config/captures/tiny.yaml"),
+                    "--out", str(own), "--no-progress"], check=True, capture_output=True)
     wf.write_scenes([{"scene": "tiny", "source": "synthetic", "path": "config/captures/tiny.yaml",
-                      "poses": "estimate", "truth": "yes", "methods": "livescene"}])
+                      "poses": "estimate", "truth": "yes", "methods": "livescene"},
+                     {"scene": "filmed", "source": "video", "path": own / "video.mp4", "poses": "estimate",
+                      "masks": own / "masks", "key_frames": own / "key_frame_value.yaml",
+                      "names": own / "mapping.yaml", "prompts": own / "prompts.yaml", "truth": "no",
+                      "methods": "livescene"}])
     config = wf.write_config(train={"steps": 40, "max_seconds": 0, "eval_every": 20},
                              evaluate={"max_views": 1, "unseen_views": 1},
                              report={"sweep_steps": 2, "sweep_scale": 0.5, "grid_views": 1},
-                             commands=["close everything"], stability={"run": False})
+                             commands=USER_COMMANDS, stability={"run": False})
     run = wf.snakemake("--cores", "2", "--configfile", str(config), timeout=900)  # the default target
     assert run.code == 0, run.output[-4000:]
 
@@ -33,7 +46,7 @@ def test_tiny_scene_end_to_end(workflow_copy):
     assert set(sweep["objects"]) == {"cabinet", "drawer"}
     assert all(len(v["images"]) == 2 for v in sweep["objects"].values())
     commands = json.loads((results / "control" / "livescene" / "commands.json").read_text())["commands"]
-    assert [c["command"] for c in commands] == ["close everything"] and "error" not in commands[0]
+    assert [c["command"] for c in commands] == USER_COMMANDS and "error" not in commands[0]
     assert commands[0]["states"] == {"cabinet": 0.0, "drawer": 0.0}
 
     summary = json.loads((results / "report" / "summary.json").read_text())
@@ -42,13 +55,46 @@ def test_tiny_scene_end_to_end(workflow_copy):
     assert "planned (no benchmark yet)" not in html  # every needed rule ran and was measured
     assert "stability.run is false" in html and 'type="range"' in html
     assert html.count("data:image/png;base64,") >= 3 + 4 + 1  # grid (truth, render, error), sweeps, command
+    _check_user_capture(wf)
     index = (wf.root / "reports" / "index.html").read_text()
-    assert 'href="scenes/tiny.html"' in index
+    assert 'href="scenes/tiny.html"' in index and 'href="scenes/filmed.html"' in index
+    for page in ("scenes/tiny.html", "scenes/filmed.html", "index.html"):
+        chromium.load((wf.root / "reports" / page).as_uri())
+        images = chromium.evaluate("Array.from(document.images).map(i => [i.alt, i.complete && i.naturalWidth > 0])")
+        assert [alt for alt, ok in images if not ok] == [], page
+        assert chromium.errors() == [], page
 
     again = wf.snakemake("all", "-n", "--cores", "2", "--configfile", str(config))
     assert again.code == 0 and "Nothing to be done" in again.output
+
+    # One scene on its own: only its jobs (and the index, which still lists the other scene's page).
+    (wf.root / "reports" / "scenes" / "filmed.html").touch()
+    alone = wf.snakemake("-n", "-p", "--cores", "2", "--configfile", str(config), "--config", "only=tiny",
+                         "--forcerun", "report_scene")
+    assert alone.code == 0, alone.output[-3000:]
+    assert "scene=filmed" not in alone.output and "scene=tiny" in alone.output
+    assert "results/filmed/report/summary.json" in alone.output  # listed in the index from the earlier run
 
     report = wf.snakemake("all", "--cores", "1", "--report", "report.zip", "--configfile", str(config))
     assert report.code == 0, report.output[-3000:]
     names = zipfile.ZipFile(wf.root / "report.zip").namelist()
     assert any(n.endswith("tiny.html") for n in names) and any(n.endswith("pose_error.json") for n in names)
+
+
+def _check_user_capture(wf):
+    """The video scene without truth: no truth-based rule ran, its synonyms reached grounding and commands."""
+    results = wf.root / "results" / "filmed"
+    for rule in ("frames", "poses", "labels", "states", "assemble", "language_targets", "train_livescene",
+                 "evaluate_livescene", "sweep_livescene", "control_livescene", "report"):
+        assert (results / "benchmarks" / f"{rule}.tsv").is_file(), rule
+    assert not (results / "pose_error.json").exists() and not (results / "capture").exists()
+    metrics = json.loads((results / "eval" / "livescene" / "metrics.json").read_text())
+    assert math.isfinite(metrics["held_out"]["psnr"]["mean"])
+    assert "unseen" not in metrics or not metrics["unseen"]
+    synonyms = [q["query"] for q in metrics["grounding"]["queries"] if q["kind"] == "synonym"]
+    assert sorted(synonyms) == ["cupboard", "top drawer"]  # from the user's prompts.yaml
+    assert metrics["grounding"]["miou_probs_synonym"] is not None
+    commands = json.loads((results / "control" / "livescene" / "commands.json").read_text())["commands"]
+    assert commands[1]["command"] == "open the cupboard" and commands[1]["states"]["cabinet"] == 1.0
+    html = (wf.root / "reports" / "scenes" / "filmed.html").read_text()
+    assert "no truth" in html and "planned (no benchmark yet)" not in html

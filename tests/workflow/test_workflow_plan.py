@@ -103,6 +103,64 @@ def test_scene_sheet_errors_name_line_scene_and_column(workflow_copy):
     assert "config/scenes.tsv" in run.output
     assert "unknown column(s) ['colour']" in run.output
     assert "line 3 (scene 'typo'): key 'source'" in run.output and "'synthetik'" in run.output
-    assert "line 4 (scene 'ready'): key 'poses'" in run.output
+    assert "line 4 (scene 'ready'): column 'poses'" in run.output
     assert "line 5 (scene 'odd'): key 'methods'" in run.output
     assert "duplicate scene name(s) ['ok']" in run.output
+
+
+def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
+    video = tmp_path / "room.mp4"
+    video.write_bytes(b"")  # a dry run only needs the file to exist
+    (tmp_path / "shots").mkdir()
+    workflow_copy.write_scenes([
+        {"scene": "none", "source": "video", "path": video, "masks": "no", "key_frames": "no", "names": "no",
+         "truth": "none"},
+        {"scene": "yes", "source": "video", "path": video, "masks": "yes", "key_frames": "no", "names": "no"},
+        {"scene": "gone", "source": "video", "path": tmp_path / "gone.mp4", "masks": "no", "key_frames": "no",
+         "names": tmp_path / "mapping.yaml", "truth": "yes"},
+        {"scene": "model", "source": "video", "path": video, "poses": "colmap:" + str(tmp_path), "masks": "no",
+         "key_frames": "no", "names": "no"},
+        {"scene": "nomodel", "source": "images", "path": tmp_path / "shots", "poses": "colmap:/no/such/sparse",
+         "masks": "no", "key_frames": "no", "names": "no"}])
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    assert "line 2 (scene 'none'): column 'truth': 'none' is not 'yes', 'no' or a capture folder" in run.output
+    assert "line 3 (scene 'yes'): column 'masks': 'yes' means the source itself holds it" in run.output
+    assert "line 4 (scene 'gone'): column 'path'" in run.output and "gone.mp4' does not exist" in run.output
+    assert "line 4 (scene 'gone'): column 'names'" in run.output
+    assert "line 4 (scene 'gone'): column 'truth': 'yes' means a synthetic capture's own truth" in run.output
+    assert "line 5 (scene 'model'): column 'poses': a COLMAP model is matched to an image folder" in run.output
+    assert "line 6 (scene 'nomodel'): column 'poses': COLMAP model folder '/no/such/sparse' does not exist" \
+        in run.output
+    assert "MissingInputException" not in run.output
+
+
+def test_imported_colmap_model_replaces_sfm_and_prompts_reach_assembly(workflow_copy, tmp_path):
+    shots, model, truth = tmp_path / "shots", tmp_path / "sparse" / "0", tmp_path / "capture"
+    for folder in (shots, model, truth / "truth"):
+        folder.mkdir(parents=True)
+    (truth / "truth" / "transforms.json").write_text("{}")
+    for name in ("mapping.yaml", "prompts.yaml", "keys.yaml"):
+        (tmp_path / name).write_text("{}")
+    workflow_copy.write_scenes([
+        {"scene": "shots", "source": "images", "path": shots, "poses": f"colmap:{model}", "masks": "no",
+         "key_frames": tmp_path / "keys.yaml", "names": tmp_path / "mapping.yaml",
+         "prompts": tmp_path / "prompts.yaml", "truth": truth, "methods": "livescene"}])
+    jobs = workflow_copy.dry_run().scene_jobs("shots")
+    assert "poses" not in jobs and len(jobs["poses_import"]) == 1
+    assert f"--model {model} --frames results/shots/frames --out results/shots/poses" in jobs["poses_import"][0]
+    assert {"frames", "states", "assemble", "pose_compare", "language_targets"} <= set(jobs)
+    assert f"--prompts {tmp_path / 'prompts.yaml'}" in jobs["assemble"][0]
+    assert all(f"--truth {truth}" in t for t in jobs["evaluate"])
+
+
+def test_only_builds_the_named_scenes(workflow_copy):
+    workflow_copy.write_scenes([
+        {"scene": "a", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"},
+        {"scene": "b", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"}])
+    run = workflow_copy.dry_run("--config", "only=b")
+    assert run.scene_jobs("b") and not run.scene_jobs("a")
+    index = [text for rule, text in run.blocks() if rule == "report_index"]
+    assert len(index) == 1 and "--pending a" in index[0]
+    bad = workflow_copy.snakemake("-n", "--cores", "1", "--config", "only=c")
+    assert bad.code != 0 and "config key 'only': scene(s) ['c'] are not in the scene sheet" in bad.output

@@ -1,6 +1,7 @@
 # Config and scene-sheet loading, schema validation and the input functions that decide per
 # scene which rules it needs. Everything here runs at workflow start, before any job.
 import json
+import shlex
 from pathlib import Path
 
 import jsonschema
@@ -33,6 +34,48 @@ def _check_config(cfg):
     validate(cfg, schema="../schemas/config.schema.yaml")  # fills the defaults
 
 
+ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
+
+
+def _row_problems(record):
+    """What the schema cannot say about one row: which values suit its source, and that paths exist."""
+    kind, poses = record["source"], record.get("poses", "estimate")
+    problems = []
+    if not Path(record["path"]).exists():
+        problems.append(f"column 'path': {record['path']!r} does not exist; fix: give the capture spec, video, "
+                        "image folder or dataset folder")
+    if kind == "dataset" and poses != "given":
+        problems.append("column 'poses': a ready dataset carries its poses; write 'given'")
+    if kind in ("video", "images") and poses == "given":
+        problems.append(f"column 'poses': a {kind} source has no poses to give; write 'estimate', or "
+                        "'colmap:<folder>' to import a COLMAP model")
+    if poses.startswith("colmap:"):
+        folder = poses.split(":", 1)[1]
+        if kind != "images":
+            problems.append(f"column 'poses': a COLMAP model is matched to an image folder by image name; the source "
+                            f"is {kind}; fix: use source 'images' with the folder the model was made from, or "
+                            "'estimate'")
+        elif not Path(folder).is_dir():
+            problems.append(f"column 'poses': COLMAP model folder {folder!r} does not exist; fix: give the folder "
+                            "holding cameras/images/points3D (.bin or .txt), or one holding sparse/0")
+    for column in ITEM_COLUMNS:
+        value = record.get(column, "")
+        if value == "yes" and kind in ("video", "images"):
+            problems.append(f"column {column!r}: 'yes' means the source itself holds it (a synthetic capture or "
+                            f"a ready dataset); for a {kind} source write 'no' or the path of the file or folder")
+        elif value not in ("", "yes", "no") and not Path(value).exists():
+            problems.append(f"column {column!r}: {value!r} does not exist; fix: give an existing file or folder, "
+                            "or write 'no'")
+    truth = record.get("truth", "no")
+    if truth == "yes" and kind != "synthetic":
+        problems.append(f"column 'truth': 'yes' means a synthetic capture's own truth; for a {kind} source write "
+                        "'no' or the capture folder holding truth/transforms.json")
+    elif truth not in ("yes", "no") and not Path(truth, "truth", "transforms.json").is_file():
+        problems.append(f"column 'truth': {truth!r} is not 'yes', 'no' or a capture folder holding "
+                        "truth/transforms.json; fix: write 'no' for a capture without truth, or the capture folder")
+    return problems
+
+
 def _read_scene_sheet(path):
     """Read and validate the scene sheet; errors name the file, the line, the scene and the column."""
     sheet_path = Path(path)
@@ -48,14 +91,11 @@ def _read_scene_sheet(path):
     for i, row in enumerate(sheet.to_dict("records")):
         record = {k: v for k, v in row.items() if v != "" and k in schema["properties"]}
         name = row.get("scene") or f"row {i + 1}"
-        for error in jsonschema.Draft202012Validator(schema).iter_errors(record):
+        errors = list(jsonschema.Draft202012Validator(schema).iter_errors(record))
+        for error in errors:
             problems.append(f"line {i + 2} (scene {name!r}): {_schema_problem(error)}")
-        if record.get("source") == "dataset" and record.get("poses", "given") != "given":
-            problems.append(f"line {i + 2} (scene {name!r}): key 'poses': a ready dataset carries its poses; "
-                            "write 'given'")
-        if record.get("source") in ("video", "images") and record.get("poses") == "given":
-            problems.append(f"line {i + 2} (scene {name!r}): key 'poses': a {record['source']} source has no poses "
-                            "to give; write 'estimate'")
+        if not errors:
+            problems += [f"line {i + 2} (scene {name!r}): {p}" for p in _row_problems(record)]
     dupes = sheet["scene"][sheet["scene"].duplicated()].tolist() if "scene" in sheet else []
     if dupes:
         problems.append(f"column 'scene': duplicate scene name(s) {dupes}")
@@ -73,8 +113,19 @@ def _read_scene_sheet(path):
     return sheet.set_index("scene", drop=False)
 
 
+def _selected_scenes(sheet):
+    """Scenes this run builds: config key 'only' (comma-separated, e.g. --config only=kitchen), else all."""
+    wanted = [s for s in str(config.get("only") or "").split(",") if s]
+    unknown = [s for s in wanted if s not in sheet.index]
+    if unknown:
+        raise WorkflowError(f"config key 'only': scene(s) {unknown} are not in the scene sheet {config['scenes']} "
+                            f"(its scenes: {list(sheet.index)}); fix: name scenes of the sheet")
+    return wanted or list(sheet.index)
+
+
 _check_config(config)
 scenes = _read_scene_sheet(config["scenes"])
+SELECTED = _selected_scenes(scenes)
 RESULTS = config["results"]
 REPORTS = config["reports"]
 
@@ -82,6 +133,12 @@ REPORTS = config["reports"]
 wildcard_constraints:
     scene="|".join(scenes.index),
     method="|".join(METHODS),
+
+
+def scene_pattern(keep):
+    """Wildcard constraint matching the sheet's scenes for which keep(scene) holds (never matches if none)."""
+    names = [s for s in scenes.index if keep(s)]
+    return "|".join(names) if names else "(?!)"
 
 
 # --- what a scene carries ---------------------------------------------------------------
@@ -102,6 +159,17 @@ def carries(scene, column):
 
 def estimates_poses(scene):
     return row(scene)["poses"] == "estimate"
+
+
+def imported_model(scene):
+    """The COLMAP model folder of a 'colmap:<folder>' poses cell, else None."""
+    value = row(scene)["poses"]
+    return value.split(":", 1)[1] if value.startswith("colmap:") else None
+
+
+def from_frames(scene):
+    """True when the dataset is assembled here from extracted frames (poses estimated or imported)."""
+    return source(scene) != "dataset" and row(scene)["poses"] != "given"
 
 
 def has_truth(scene):
@@ -137,7 +205,7 @@ def dataset_dir(scene):
     kind = source(scene)
     if kind == "dataset":
         return row(scene)["path"]
-    if kind == "synthetic" and not estimates_poses(scene):
+    if kind == "synthetic" and not from_frames(scene):
         return R(scene, "truth_dataset")
     return R(scene, "dataset")
 
@@ -151,14 +219,13 @@ def dataset_input(wildcards):
     return files
 
 
-def item_path(scene, column, in_capture):
-    """Path of masks / key frames / names: inside the capture for 'yes' on synthetic, else the row's path."""
-    value = row(scene)[column]
-    if value == "yes":
-        if source(scene) == "synthetic":
-            return str(Path(capture_dir(scene), in_capture))
-        raise WorkflowError(f"{config['scenes']}: scene {scene!r}, column {column!r}: 'yes' needs a synthetic or "
-                            f"dataset source; for a {source(scene)} source write the path of the file or folder")
+def prompts_file(scene):
+    """prompts.yaml of the scene's names (synonyms, descriptions), or None."""
+    value = row(scene)["prompts"]
+    if value == "no":
+        return None
+    if value in ("", "yes"):
+        return str(Path(capture_dir(scene), "prompts.yaml")) if source(scene) == "synthetic" else None
     return value
 
 
@@ -167,25 +234,27 @@ def item_path(scene, column, in_capture):
 
 def plan(scene):
     """Rule name -> (needed, reason). The report shows it; all_targets follows it."""
-    kind, est = source(scene), estimates_poses(scene)
-    made = kind != "dataset"
+    kind, est, model = source(scene), estimates_poses(scene), imported_model(scene)
+    framed = from_frames(scene)
+    given = "poses come with the data"
     p = {}
     p["capture"] = (kind == "synthetic", "synthetic spec" if kind == "synthetic" else f"source is {kind}")
-    p["capture_dataset"] = (kind == "synthetic" and not est,
-                            "poses given: dataset written from the capture truth" if kind == "synthetic" and not est
+    p["capture_dataset"] = (kind == "synthetic" and not framed,
+                            "poses given: dataset written from the capture truth" if kind == "synthetic" and not framed
                             else "poses are estimated" if kind == "synthetic" else f"source is {kind}")
-    p["frames"] = (made and est, "frames from the video" if made and est else "poses come with the data")
-    p["poses"] = (made and est, "COLMAP poses" if made and est else "poses come with the data")
-    p["pose_compare"] = (made and est and has_truth(scene),
-                         "estimated poses vs truth" if made and est and has_truth(scene)
+    p["frames"] = (framed, "frames from the video or image folder" if framed else given)
+    p["poses"] = (framed and est, "COLMAP poses" if framed and est else
+                  "COLMAP model given: imported instead" if model else given)
+    p["poses_import"] = (model is not None, f"COLMAP model imported from {model} (no SfM)" if model
+                         else "no COLMAP model given")
+    p["pose_compare"] = (framed and has_truth(scene),
+                         "estimated poses vs truth" if framed and has_truth(scene)
                          else "no truth" if not has_truth(scene) else "poses were not estimated")
-    labels = made and est and carries(scene, "masks")
-    p["labels"] = (labels, "masks given" if labels else "poses come with the data" if not (made and est)
-                   else "scene has no masks")
-    states = made and est and carries(scene, "key_frames")
-    p["states"] = (states, "key frames given" if states else "poses come with the data" if not (made and est)
-                   else "scene has no key frames")
-    p["assemble"] = (made and est, "joins frames, poses, labels, states" if made and est
+    labels = framed and carries(scene, "masks")
+    p["labels"] = (labels, "masks given" if labels else given if not framed else "scene has no masks")
+    states = framed and carries(scene, "key_frames")
+    p["states"] = (states, "key frames given" if states else given if not framed else "scene has no key frames")
+    p["assemble"] = (framed, "joins frames, poses, labels, states" if framed
                      else "dataset comes ready" if kind == "dataset" else "dataset written from the capture truth")
     p["scene_validate"] = (kind == "dataset", "ready dataset checked against the contract" if kind == "dataset"
                            else "dataset written by this workflow (validated when written)")
@@ -215,7 +284,7 @@ def scene_outputs(scene):
     out = {}
     if needed(scene, "capture"):
         out["capture"] = capture_dir(scene)
-    if needed(scene, "poses"):
+    if needed(scene, "poses") or needed(scene, "poses_import"):
         out["poses"] = R(scene, "poses")
     if needed(scene, "pose_compare"):
         out["pose_error"] = R(scene, "pose_error.json")
@@ -241,6 +310,19 @@ def scene_outputs(scene):
 def all_targets():
     """Final outputs: the index page (which pulls in every scene page and all it needs)."""
     return [str(Path(REPORTS, "index.html"))]
+
+
+def earlier_summaries(scene=None):
+    """summary.json of the sheet's unselected scenes whose pages an earlier run wrote (or just that scene's)."""
+    names = [scene] if scene else [s for s in scenes.index if s not in SELECTED]
+    return [R(s, "report", "summary.json") for s in names
+            if Path(R(s, "report", "summary.json")).is_file() and Path(REPORTS, "scenes", f"{s}.html").is_file()]
+
+
+def pending_arg():
+    """--pending of the index: the sheet's scenes with no page (not built now, nor by an earlier run)."""
+    names = [s for s in scenes.index if s not in SELECTED and not earlier_summaries(s)]
+    return f"--pending {shlex.quote(','.join(names))}" if names else ""
 
 
 def log_path(name):
@@ -358,14 +440,18 @@ def assemble_input(wildcards):
         files["states"] = R(scene, "states")
     if source(scene) == "synthetic":
         files["capture"] = capture_dir(scene)
+    elif prompts_file(scene) is not None and has_names(scene):
+        files["prompts"] = prompts_file(scene)
     return files
 
 
 def assemble_args(wildcards, input):
     keys = input.keys()
     args = [f"--{k} {input[k]}" for k in ("labels", "states") if k in keys]
-    if "capture" in keys:
-        args.append(f"--prompts {Path(input.capture, 'prompts.yaml')}")
+    if "prompts" in keys:
+        args.append(f"--prompts {input.prompts}")
+    elif "capture" in keys and prompts_file(wildcards.scene) is not None and has_names(wildcards.scene):
+        args.append(f"--prompts {prompts_file(wildcards.scene)}")  # inside the capture folder (an input)
     return " ".join(args)
 
 

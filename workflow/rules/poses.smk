@@ -3,6 +3,8 @@
 
 
 rule poses:
+    wildcard_constraints:
+        scene=scene_pattern(lambda s: not imported_model(s)),  # poses_import writes the same folder
     input:
         unpack(poses_input),
     output:
@@ -27,6 +29,30 @@ rule poses:
         "{params.cli} poses --frames {input.frames} --out {output} {params.masks} --threads {threads}"
         " --seed {params.seed} --matcher {params.matcher} --max-features {params.features} --no-progress"
         " > {log} 2>&1"
+
+
+rule poses_import:
+    wildcard_constraints:
+        scene=scene_pattern(imported_model),
+    input:
+        frames=R("{scene}", "frames"),
+        model=lambda w: imported_model(w.scene),
+    output:
+        directory(R("{scene}", "poses")),
+    log:
+        log_path("poses_import"),
+    benchmark:
+        bench_path("poses_import")
+    params:
+        cli=LIVESCENE,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENV
+    shell:
+        "{params.cli} poses import --model {input.model} --frames {input.frames} --out {output} > {log} 2>&1"
 
 
 rule pose_compare:

@@ -50,7 +50,7 @@ rule report_scene:
         methods=lambda w: ",".join(methods(w.scene)),
         results=lambda w: R(w.scene),
         data=lambda w: dataset_dir(w.scene),
-        truth=lambda w: truth_dir(w.scene) if has_truth(w.scene) else "",
+        truth=lambda w: f"--truth {shlex.quote(truth_dir(w.scene))}" if has_truth(w.scene) else "",
         stability=str(Path(RESULTS, "stability", "summary.json")),
         views=config["report"]["grid_views"],
     threads: 1
@@ -61,15 +61,15 @@ rule report_scene:
         ENV
     shell:
         "{params.cli} report scene --scene {wildcards.scene} --results {params.results} --data {params.data}"
-        " --truth {params.truth:q} --methods {params.methods} --plan-json {params.plan:q}"
+        " {params.truth} --methods {params.methods} --plan-json {params.plan:q}"
         " --stability {params.stability} --views {params.views} --out {output.page} --summary {output.summary}"
         " > {log} 2>&1"
 
 
 rule report_index:
     input:
-        summaries=expand(R("{scene}", "report", "summary.json"), scene=scenes.index),
-        pages=expand(str(Path(REPORTS, "scenes", "{scene}.html")), scene=scenes.index),
+        summaries=expand(R("{scene}", "report", "summary.json"), scene=SELECTED),
+        pages=expand(str(Path(REPORTS, "scenes", "{scene}.html")), scene=SELECTED),
     output:
         report(
             str(Path(REPORTS, "index.html")),
@@ -83,6 +83,9 @@ rule report_index:
         str(Path(RESULTS, "benchmarks", "report_index.tsv"))
     params:
         cli=LIVESCENE,
+        # Pages of the sheet's other scenes made by earlier runs (`--config only=...`) are listed too.
+        earlier=lambda w: " ".join(earlier_summaries()),
+        pending=lambda w: pending_arg(),
     threads: 1
     resources:
         mem_mb=1000,
@@ -90,4 +93,5 @@ rule report_index:
     conda:
         ENV
     shell:
-        "{params.cli} report index --summaries {input.summaries} --out {output} > {log} 2>&1"
+        "{params.cli} report index --summaries {input.summaries} {params.earlier} {params.pending}"
+        " --out {output} > {log} 2>&1"
