@@ -15,7 +15,7 @@ from typing import Any
 
 import yaml
 
-from stages.scene import InputError
+from stages.scene import InputError, read_yaml_mapping
 
 PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "model"
 
@@ -357,8 +357,40 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return key.strip().split("."), yaml.safe_load(value)
 
 
+METHOD_DIR = PRESET_DIR / "methods"
+
+
+def method_overlay(method: str, preset: str) -> dict[str, Any]:
+    """The sections of ``config/model/methods/<method>.yaml`` that differ from base preset ``preset``.
+
+    Each file maps a preset scale (``cpu-demo``, ``gpu-paper``) to the sections that differ, e.g.
+    ``{gpu-paper: {model: {conerf: {hidden: 128}}}}`` (docs/baselines.md); a method or scale without an
+    entry trains the base preset as is.
+    """
+    path = METHOD_DIR / f"{method}.yaml"
+    if not path.is_file():
+        return {}
+    data = read_yaml_mapping(path, "{<preset scale>: {model: {...}, train: {...}}}", error=InputError)
+    overlay = data.get(Path(preset).stem) or {}
+    if not isinstance(overlay, dict):
+        raise InputError(path, f"entry {Path(preset).stem!r} is not a mapping", "write model:/train: sections under it")
+    return overlay
+
+
+def _merge(base: dict[str, Any], overlay: dict[str, Any]) -> None:
+    for key, value in overlay.items():
+        if isinstance(value, dict) and isinstance(base.get(key), dict):
+            _merge(base[key], value)
+        else:
+            base[key] = value
+
+
 def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, **top: Any) -> RunConfig:
-    """A RunConfig from a preset, then ``--set`` overrides, then top-level fields (method, seed, data...)."""
+    """A RunConfig from a preset, the method's overlay on it, ``--set`` overrides, then top-level fields.
+
+    This is the one way a method's config is built: the workflow's ``livescene train --method m``,
+    ``livescene compare`` and the Python API all get preset + ``config/model/methods/<m>.yaml``.
+    """
     path = preset_path(preset)
     try:
         data = yaml.safe_load(path.read_text()) or {}
@@ -367,8 +399,11 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
     if not isinstance(data, dict):
         raise InputError(path, "top level is not a mapping", "write sections model: and train:")
     data.setdefault("preset", path.stem)
-    for text in overrides or []:
-        keys, value = parse_override(text)
+    parsed = [(text, *parse_override(text)) for text in overrides or []]
+    method = top.get("method") or next((v for _, k, v in reversed(parsed) if k == ["method"]), data.get("method"))
+    if method:  # the overlay sits between the preset and the explicit overrides, which win
+        _merge(data, method_overlay(str(method), path.stem))
+    for text, keys, value in parsed:
         node = data
         for k in keys[:-1]:
             node = node.setdefault(k, {})

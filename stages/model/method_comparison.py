@@ -6,7 +6,8 @@ Python process (so the peak-memory figure of ``run.json``, the process's max
 RSS on the CPU, belongs to that method alone), then renders the same held-out
 frames from every run and scores them with the evaluation stage's PSNR and
 SSIM. Per-method differences from the base preset live in
-``config/model/methods/<method>.yaml`` (one overlay per preset scale).
+``config/model/methods/<method>.yaml`` (one overlay per preset scale), which
+``load_config`` applies for every caller.
 
 A wall-clock budget makes the step count depend on the machine's load (and the
 trainer's learning-rate decay follows the spent share of the budget), so each
@@ -33,46 +34,22 @@ import numpy as np
 import pandas as pd
 import torch
 
-from stages.scene import InputError, atomic_path, read_scene, read_yaml_mapping, write_json
+from stages.scene import InputError, atomic_path, read_scene, write_json
 
-from .config import PRESET_DIR, load_config
+from .config import load_config
 from .methods import SceneInfo, build_model
 from .methods.baselines import BASELINES
 from .trainer import PendingStep, Trainer
 
-METHOD_PRESET_DIR = PRESET_DIR / "methods"
 ALL_METHODS = ("livescene", *BASELINES)
 TABLE_COLUMNS = ["method", "psnr", "ssim", "eval_frames", "params", "field_params", "peak_memory_mib",
                  "train_seconds", "steps", "train_psnr_rays", "status"]
 
 
 # -- presets ----------------------------------------------------------------------------------------------------
-def _flatten(node: Any, prefix: list[str]) -> list[str]:
-    if isinstance(node, dict):
-        return [o for k, v in node.items() for o in _flatten(v, [*prefix, str(k)])]
-    return [f"{'.'.join(prefix)}={json.dumps(node)}"]
-
-
-def method_overrides(method: str, scale: str) -> list[str]:
-    """``--set`` overrides that turn the base preset ``scale`` into this method's preset (may be empty).
-
-    ``config/model/methods/<method>.yaml`` maps a preset scale (``cpu-demo``,
-    ``gpu-paper``) to the sections that differ, e.g. ``{cpu-demo: {model: {conerf: {hidden: 64}}}}``.
-    """
-    path = METHOD_PRESET_DIR / f"{method}.yaml"
-    if not path.is_file():
-        return []
-    data = read_yaml_mapping(path, "{<preset scale>: {model: {...}, train: {...}}}", error=InputError)
-    scale_name = Path(scale).stem
-    overlay = data.get(scale_name) or {}
-    if not isinstance(overlay, dict):
-        raise InputError(path, f"entry {scale_name!r} is not a mapping", "write model:/train: sections under it")
-    return _flatten(overlay, [])
-
-
 def method_preset(method: str, scale: str) -> dict[str, Any]:
     """The full preset (model and train sections) of ``method`` at ``scale``: base preset + method overlay."""
-    cfg = load_config(scale, method_overrides(method, scale), method=method).to_dict()
+    cfg = load_config(scale, method=method).to_dict()
     return {"preset": cfg["preset"], "model": cfg["model"], "train": cfg["train"]}
 
 
@@ -230,7 +207,7 @@ def compare_methods(cfg: CompareConfig, progress: bool = True) -> pd.DataFrame:
         run_dir = out / method
         if (run_dir / "checkpoints").is_dir():
             raise InputError(run_dir, "already holds a run", "choose a new --out folder")
-        overrides = [*method_overrides(method, cfg.scale), *cfg.overrides]
+        overrides = list(cfg.overrides)  # load_config adds the method's overlay
         replay = str(Path(cfg.replay) / method) if cfg.replay else ""
         overrides.append(f"train.max_seconds={0 if replay else cfg.budget_s}")
         if cfg.max_steps > 0:
@@ -303,7 +280,7 @@ def format_table(table: pd.DataFrame) -> str:
 # -- parameters versus objects ------------------------------------------------------------------------------------
 def parameter_count(method: str, n_objects: int, scale: str = "cpu-demo", n_frames: int = 100) -> dict[str, int]:
     """Parameters of ``method`` for a scene of ``n_objects`` objects, by group, built on the meta device (free)."""
-    cfg = load_config(scale, method_overrides(method, scale), method=method)
+    cfg = load_config(scale, method=method)
     info = SceneInfo(objects=[f"object{i}" for i in range(n_objects)], n_frames=n_frames)
     with torch.device("meta"):
         model = build_model(method, cfg.model, info)

@@ -16,7 +16,6 @@ from stages.model.method_comparison import (
     ALL_METHODS,
     CompareConfig,
     compare_methods,
-    method_overrides,
     params_vs_objects,
 )
 from stages.model.methods import SceneInfo
@@ -102,7 +101,7 @@ def test_k_planes_reads_time_not_states(tiny_overrides):
 @pytest.mark.parametrize("method", ["mk-planes", "mk-planes-star", "conerf", "k-planes"])
 def test_method_trains_and_renders(method, tiny_dataset, tiny_config, tmp_path):
     out = tmp_path / method
-    config = tiny_config(tiny_dataset.root, f"method={method}", *method_overrides(method, "cpu-demo"), steps=3)
+    config = tiny_config(tiny_dataset.root, f"method={method}", steps=3)
     summary = Trainer(config, out, device="cpu", progress=False).train()
     assert summary["method"] == method and summary["steps"] == 3
     assert summary["params"]["total"] > 0 and summary["peak_memory_mib"] > 0
