@@ -23,7 +23,7 @@ from tqdm import tqdm
 from stages.scene import Camera, Frame, InputError, SceneDataset, atomic_dir, write_json
 
 from .locality import locality
-from .metrics import Lpips, iou, psnr, ssim, summarize
+from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
 from .unseen_states import unseen_combinations
 
@@ -156,6 +156,7 @@ class Evaluator:
             "views": records,
             "psnr": summarize([r["psnr"] for r in records]),
             "ssim": summarize([r["ssim"] for r in records]),
+            "ssim_form": SSIM_FORM,
             "lpips": summarize([r["lpips"] for r in records]) if lpips.available else None,
             "lpips_status": lpips.status,
             "image_size": [cam.width, cam.height],

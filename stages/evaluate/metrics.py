@@ -1,4 +1,5 @@
-"""Image and mask metrics: PSNR (whole image or a pixel mask), SSIM, IoU, and LPIPS when it is available.
+"""Image and mask metrics: PSNR (whole image or a pixel mask), SSIM (Gaussian 11x11), IoU, and LPIPS when it
+is available.
 
 LPIPS needs pretrained network weights that cannot be downloaded here; it is
 computed only when torchvision and the weights are already on disk, and
@@ -36,15 +37,32 @@ def psnr(pred: np.ndarray, target: np.ndarray, mask: np.ndarray | None = None, d
     return 10.0 * math.log10(data_range**2 / mse)
 
 
+SSIM_FORM = "Gaussian window 11x11, sigma 1.5 (torchmetrics; the form nerfstudio and the LiveScene paper report)"
+
+
 def ssim(pred: np.ndarray, target: np.ndarray, data_range: float = 1.0) -> float:
-    """Structural similarity of two ``[H, W, 3]`` images (scikit-image, Gaussian-free 7x7 window)."""
-    from skimage.metrics import structural_similarity
+    """Structural similarity of two ``[H, W, 3]`` images in the standard form (``SSIM_FORM``).
+
+    torchmetrics computes it with a Gaussian 11x11 window (sigma 1.5) and needs no weights, so the numbers
+    compare with published ones; an image smaller than the window gets the largest odd window that fits, with
+    sigma scaled alike (torchmetrics sizes the window from sigma).
+    """
+    import torch
+    from torchmetrics.functional.image import structural_similarity_index_measure
 
     pred = np.asarray(pred, dtype=np.float64)
     target = np.asarray(target, dtype=np.float64)
-    win = min(7, *pred.shape[:2])
+    if pred.shape != target.shape:
+        raise ValueError(f"prediction {pred.shape} and target {target.shape} differ in shape")
+    win = min(11, *pred.shape[:2])
     win -= 1 - win % 2  # the window must be odd
-    return float(structural_similarity(pred, target, data_range=data_range, channel_axis=-1, win_size=win))
+
+    def nchw(x: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(x)).permute(2, 0, 1)[None]
+
+    value = structural_similarity_index_measure(nchw(pred), nchw(target), data_range=data_range,
+                                                kernel_size=win, sigma=1.5 * win / 11)
+    return float(value)
 
 
 def iou(pred: np.ndarray, truth: np.ndarray) -> float:

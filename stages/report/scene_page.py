@@ -160,6 +160,15 @@ def _flag_banner(flags: dict[str, TrustFlag]) -> str:
             f"are shown for diagnosis only.</p>")
 
 
+def _ssim_form(sd: SceneData) -> str:
+    """Which SSIM the evaluation computed (older metrics.json files predate the record: say so)."""
+    forms = {str(_metric(m, "held_out", "ssim_form")) for m in sd.methods if m.metrics is not None}
+    forms.discard("None")
+    if not forms:
+        return "SSIM: form not recorded (metrics.json older than the Gaussian-window SSIM)."
+    return "SSIM: " + escape("; ".join(sorted(forms))) + "."
+
+
 def section_methods(sd: SceneData) -> str:
     rows = []
     flags = scene_trust(sd)
@@ -183,7 +192,8 @@ def section_methods(sd: SceneData) -> str:
     return ("<p>Held-out views of the test split; unseen combinations and grounding need truth and names. "
             "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
-            "not complete is flagged, and its numbers are not results.</p>"
+            "not complete is flagged, and its numbers are not results. "
+            + _ssim_form(sd) + "</p>"
             + _flag_banner(flags)
             + table(["method", "trust", "PSNR dB", "SSIM", "LPIPS", "unseen PSNR dB", "grounding mIoU (probs)",
                      "parameters", "peak memory MiB", "train s", "steps", "render fps"], rows))

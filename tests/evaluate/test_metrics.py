@@ -40,7 +40,7 @@ def test_ssim_identity_and_ordering():
     slight = np.clip(img + rng.normal(0, 0.02, img.shape), 0, 1)
     heavy = np.clip(img + rng.normal(0, 0.3, img.shape), 0, 1)
     assert 1.0 > ssim(slight, img) > ssim(heavy, img)
-    assert np.isfinite(ssim(img[:5, :5], img[:5, :5] * 0.9))  # smaller than the 7x7 window
+    assert np.isfinite(ssim(img[:5, :5], img[:5, :5] * 0.9))  # smaller than the 11x11 window
 
 
 def test_iou_hand_computed():
@@ -102,3 +102,30 @@ def test_unseen_combinations_are_far_from_training():
 def test_unseen_combinations_scale_to_many_objects():
     combos = unseen_combinations(10, np.zeros((5, 10)), levels=(0.0, 1.0))
     assert len(combos) == 20 and all(c.unseen for c in combos)
+
+
+def test_ssim_is_the_standard_gaussian_form():
+    """Equal to scikit-image's Gaussian-weighted SSIM (Wang et al. 2004: 11x11, sigma 1.5, population
+    covariance) away from the borders' handling, and clearly not the flat 7x7 form used before."""
+    from skimage.metrics import structural_similarity
+
+    rng = np.random.default_rng(3)
+    img = rng.random((96, 128, 3))
+    noisy = np.clip(img + 0.08 * rng.standard_normal(img.shape), 0, 1)
+    ours = ssim(noisy, img)
+    gaussian = structural_similarity(noisy, img, data_range=1.0, channel_axis=-1, gaussian_weights=True,
+                                     sigma=1.5, use_sample_covariance=False)
+    flat7 = structural_similarity(noisy, img, data_range=1.0, channel_axis=-1, win_size=7)
+    assert ours == pytest.approx(gaussian, abs=2e-3)
+    assert abs(ours - flat7) > 5 * abs(ours - gaussian)
+
+
+def test_psnr_matches_torchmetrics():
+    import torch
+    from torchmetrics.functional.image import peak_signal_noise_ratio
+
+    rng = np.random.default_rng(4)
+    img = rng.random((24, 32, 3))
+    noisy = np.clip(img + 0.05 * rng.standard_normal(img.shape), 0, 1)
+    theirs = float(peak_signal_noise_ratio(torch.from_numpy(noisy), torch.from_numpy(img), data_range=1.0))
+    assert psnr(noisy, img) == pytest.approx(theirs, rel=1e-6)
