@@ -24,7 +24,7 @@ from pathlib import Path
 import pandas as pd
 from demo_dataset import cached_demo_dataset
 
-from stages.model.method_comparison import ALL_METHODS, CompareConfig, compare_methods, format_table
+from stages.compare.method_comparison import ALL_METHODS, CompareConfig, compare_methods, format_table
 
 
 def main() -> int:

@@ -4,7 +4,7 @@ Models are built on torch's meta device (no memory, no time), with each
 method's preset overlay from config/model/methods/. Writes one long CSV
 (scale, method, objects, planes_per_scale, field/proposal/probability/total
 parameters) and prints the total per method. The report can call
-``stages.model.method_comparison.params_vs_objects`` directly for the same table.
+``stages.compare.method_comparison.params_vs_objects`` directly for the same table.
 
     .venv/bin/python benchmarks/params_vs_objects.py [--out results/params_vs_objects.csv] [--max-objects 10]
 """
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from stages.model.method_comparison import ALL_METHODS, params_vs_objects
+from stages.compare.method_comparison import ALL_METHODS, params_vs_objects
 from stages.scene import atomic_path
 
 ROOT = Path(__file__).resolve().parents[1]

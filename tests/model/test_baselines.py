@@ -10,14 +10,14 @@ import pandas as pd
 import pytest
 import torch
 
-from stages.model import Trainer, build_model, load_config, load_run
-from stages.model.compare_cli import main as compare_main
-from stages.model.method_comparison import (
+from stages.compare.cli import main as compare_main
+from stages.compare.method_comparison import (
     ALL_METHODS,
     CompareConfig,
     compare_methods,
     params_vs_objects,
 )
+from stages.model import Trainer, build_model, load_config, load_run
 from stages.model.methods import SceneInfo
 from stages.model.methods.mk_planes import mk_planes_pairs, mk_planes_star_pairs
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import yaml
 
+from stages.compare.method_comparison import method_preset
 from stages.model import load_config
 from stages.model.config import METHOD_DIR
-from stages.model.method_comparison import method_preset
 
 
 def test_overlay_applies_whichever_way_the_method_is_named():

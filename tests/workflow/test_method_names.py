@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-from stages.model.method_comparison import ALL_METHODS
+from stages.compare.method_comparison import ALL_METHODS
 from stages.model.methods import METHODS
 
 SCHEMAS = Path(__file__).resolve().parents[2] / "workflow" / "schemas"

@@ -34,12 +34,11 @@ import numpy as np
 import pandas as pd
 import torch
 
+from stages.model.config import load_config
+from stages.model.methods import SceneInfo, build_model
+from stages.model.methods.baselines import BASELINES
+from stages.model.trainer import PendingStep, Trainer
 from stages.scene import InputError, atomic_path, read_scene, write_json
-
-from .config import load_config
-from .methods import SceneInfo, build_model
-from .methods.baselines import BASELINES
-from .trainer import PendingStep, Trainer
 
 ALL_METHODS = ("livescene", *BASELINES)
 TABLE_COLUMNS = ["method", "psnr", "ssim", "eval_frames", "params", "field_params", "peak_memory_mib",
@@ -118,7 +117,7 @@ def run_job(job: TrainJob) -> dict[str, Any]:
 
 def _train_in_child(job: TrainJob, log_path: Path) -> int:
     """Run ``run_job`` in a fresh interpreter (own RSS, own threads); stdout/stderr to ``log_path``."""
-    cmd = [sys.executable, "-m", "stages.model.method_comparison", json.dumps(job.__dict__)]
+    cmd = [sys.executable, "-m", "stages.compare.method_comparison", json.dumps(job.__dict__)]
     log_path.parent.mkdir(parents=True, exist_ok=True)
     with log_path.open("w") as log:
         return subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, check=False).returncode
@@ -141,8 +140,7 @@ def score_run(run_dir: Path, data: str | Path, eval_frames: int = 4, eval_scale:
     import cv2
 
     from stages.evaluate.metrics import psnr, ssim
-
-    from .run import load_run
+    from stages.model.run import load_run
 
     ds = read_scene(data)
     run = load_run(run_dir)
