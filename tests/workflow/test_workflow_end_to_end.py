@@ -10,9 +10,11 @@ import math
 import subprocess
 import sys
 import zipfile
+from pathlib import Path
 
 import pytest
 
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "workflow"
 USER_COMMANDS = ["close everything", "open the cupboard"]  # a synonym from prompts.yaml
 
 
@@ -58,11 +60,13 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     _check_user_capture(wf)
     index = (wf.root / "reports" / "index.html").read_text()
     assert 'href="scenes/tiny.html"' in index and 'href="scenes/filmed.html"' in index
-    for page in ("scenes/tiny.html", "scenes/filmed.html", "index.html"):
+    for page in ("scenes/tiny.html", "index.html", "scenes/filmed.html"):  # the last one is kept as a picture
         chromium.load((wf.root / "reports" / page).as_uri())
         images = chromium.evaluate("Array.from(document.images).map(i => [i.alt, i.complete && i.naturalWidth > 0])")
         assert [alt for alt, ok in images if not ok] == [], page
         assert chromium.errors() == [], page
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    chromium.screenshot(ARTIFACTS / "no_truth_scene_page.png")  # the user-capture page, for a human to look at
 
     again = wf.snakemake("all", "-n", "--cores", "2", "--configfile", str(config))
     assert again.code == 0 and "Nothing to be done" in again.output
