@@ -212,13 +212,16 @@ def dataset_dir(scene):
     return R(scene, "dataset")
 
 
-def dataset_input(wildcards):
+def dataset_files(scene):
     """The dataset plus, for a ready dataset, the marker of its validation."""
-    scene = wildcards.scene
     files = {"data": dataset_dir(scene)}
     if source(scene) == "dataset":
         files["valid"] = R(scene, "dataset_valid.json")
     return files
+
+
+def dataset_input(wildcards):
+    return dataset_files(wildcards.scene)
 
 
 def prompts_file(scene):
@@ -294,7 +297,7 @@ def scene_outputs(scene):
         out["labels"] = R(scene, "labels")
     if needed(scene, "states"):
         out["states"] = R(scene, "states")
-    out.update({f"dataset_{k}": v for k, v in dataset_input(type("W", (), {"scene": scene})).items()})
+    out.update({f"dataset_{k}": v for k, v in dataset_files(scene).items()})
     if needed(scene, "language_targets"):
         out["targets"] = R(scene, "language", "targets.npz")
     for m in methods(scene):
