@@ -40,6 +40,7 @@ rule control:
     resources:
         mem_mb=4000,
         runtime=20,
+        gpu=config["gpus"],
     conda:
         ENV
     script:
