@@ -101,6 +101,12 @@ def _ci95(arr: np.ndarray, mean: float) -> list[float] | None:
     return [mean - half, mean + half]
 
 
+def lpips_weights_dir() -> Path:
+    """Where LPIPS's AlexNet backbone must lie (torch hub's cache: ``$TORCH_HOME/hub/checkpoints``,
+    file ``alexnet-owt-7be5be79.pth``); nothing is downloaded at run time (docs/language.md)."""
+    return Path(os.environ.get("TORCH_HOME", Path.home() / ".cache" / "torch")) / "hub" / "checkpoints"
+
+
 class Lpips:
     """LPIPS (AlexNet) through torchmetrics, only from weights already on this machine.
 
@@ -117,9 +123,13 @@ class Lpips:
             import torchvision  # noqa: F401
             from torchmetrics.image.lpip import LearnedPerceptualImagePatchSimilarity
         except ImportError as exc:
-            self.status = f"not available: {exc.name or exc} is not installed (LPIPS needs torchvision and weights)"
+            self.status = (f"not available: {exc.name or exc} is not installed (pip install -e '.[lpips]', then put "
+                           f"the AlexNet weights in {lpips_weights_dir()})")
             return
-        hub = Path(os.environ.get("TORCH_HOME", Path.home() / ".cache" / "torch")) / "hub" / "checkpoints"
+        except Exception as exc:  # a torchvision built for another torch fails at import with a RuntimeError
+            self.status = f"not available: torchvision does not load beside this torch ({type(exc).__name__}: {exc})"
+            return
+        hub = lpips_weights_dir()
         if not any(hub.glob("alexnet-*.pth")):
             self.status = f"not available: no AlexNet weights in {hub} (and none may be downloaded)"
             return

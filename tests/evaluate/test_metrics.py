@@ -129,3 +129,17 @@ def test_psnr_matches_torchmetrics():
     noisy = np.clip(img + 0.05 * rng.standard_normal(img.shape), 0, 1)
     theirs = float(peak_signal_noise_ratio(torch.from_numpy(noisy), torch.from_numpy(img), data_range=1.0))
     assert psnr(noisy, img) == pytest.approx(theirs, rel=1e-6)
+
+
+def test_ssim_equals_torchmetrics_on_a_reference_pair():
+    """The report's SSIM is torchmetrics' StructuralSimilarityIndexMeasure (the module nerfstudio uses)."""
+    import torch
+    from torchmetrics.image import StructuralSimilarityIndexMeasure
+
+    rng = np.random.default_rng(5)
+    img = rng.random((64, 80, 3))
+    blurred = np.clip(0.7 * img + 0.3 * np.roll(img, 1, axis=1) + 0.02 * rng.standard_normal(img.shape), 0, 1)
+    module = StructuralSimilarityIndexMeasure(data_range=1.0)
+    theirs = float(module(torch.from_numpy(blurred).permute(2, 0, 1)[None].float(),
+                          torch.from_numpy(img).permute(2, 0, 1)[None].float()))
+    assert ssim(blurred, img) == pytest.approx(theirs, abs=1e-4)

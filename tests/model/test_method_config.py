@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import yaml
 
-from stages.compare.method_comparison import method_preset
+from stages.compare.method_comparison import ALL_METHODS, method_preset
 from stages.model import load_config
 from stages.model.config import METHOD_DIR
 
@@ -26,7 +26,7 @@ def test_explicit_overrides_win_over_the_overlay():
 
 
 def test_workflow_and_compare_train_the_same_config():
-    for method in ("conerf", "k-planes", "mk-planes"):
+    for method in ALL_METHODS:
         for scale in ("cpu-demo", "gpu-paper"):
             trained = load_config(scale, method=method).to_dict()  # what `livescene train --method` builds
             compared = method_preset(method, scale)  # what `livescene compare` trains
