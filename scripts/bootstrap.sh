@@ -26,11 +26,17 @@ if ((${#need_apt[@]})); then
   fi
 fi
 
-# The venv is stale when pyproject.toml changed since it was last installed.
+# The venv is stale when pyproject.toml changed since it was last installed. The tests also need the
+# optional viewer (viser), so --test installs that extra and keeps its own stamp.
+TARGET=.
+if [[ "${1:-}" == "--test" ]]; then
+  TARGET=".[viewer]"
+  STAMP=$VENV/.installed-test
+fi
 if [[ ! -x $VENV/bin/python || ! -f $STAMP || pyproject.toml -nt $STAMP ]]; then
   echo "bootstrap: setting up $VENV (torch==2.13.0 CPU build from the local wheel cache where present)"
   [[ -x $VENV/bin/python ]] || "$PYTHON" -m venv "$VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
-  "$VENV/bin/python" -m pip install -q -e .
+  "$VENV/bin/python" -m pip install -q -e "$TARGET"
   touch "$STAMP"
 fi

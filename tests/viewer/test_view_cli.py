@@ -1,0 +1,72 @@
+"""``livescene view``: start-up, and every refusal names the file, the problem and the fix."""
+
+from __future__ import annotations
+
+import re
+import sys
+
+import pytest
+
+from stages.cli import available
+from stages.viewer.cli import main
+from stages.viewer.viser_dependency import VISER_VERSION, install_command
+
+
+def test_view_is_a_livescene_subcommand():
+    assert available()["view"][0] == "stages.viewer.cli"
+
+
+def test_without_viser_the_error_gives_the_pip_command(monkeypatch, capsys, viewer_scene):
+    monkeypatch.setitem(sys.modules, "viser", None)  # what `import viser` sees when it is not installed
+    assert main(["--run", str(viewer_scene.run_dir)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: viser: the live viewer needs the optional package viser, which is not installed")
+    assert f'-m pip install "viser=={VISER_VERSION}"' in err and install_command() in err
+    assert 'pip install -e ".[viewer]"' in err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--resolution", "big"], r"--resolution: 'big' is not WIDTHxHEIGHT; fix: write e.g. --resolution 128x96"),
+    (["--frame-budget", "0"], r"--frame-budget: 0.0 seconds; fix: give a positive number"),
+    (["--threads", "0"], r"--threads: 0 threads; fix: give 1 or more"),
+])
+def test_bad_options_are_refused(args, message, capsys, viewer_scene):
+    pytest.importorskip("viser")
+    assert main(["--run", str(viewer_scene.run_dir), "--data", str(viewer_scene.data), *args]) == 2
+    assert re.search(message, capsys.readouterr().err)
+
+
+def test_a_missing_run_and_a_foreign_dataset_are_refused(capsys, tmp_path, viewer_scene, tiny_dataset):
+    pytest.importorskip("viser")
+    assert main(["--run", str(tmp_path / "nothing")]) == 2
+    assert "run folder not found; fix: train one with `livescene train" in capsys.readouterr().err
+    assert main(["--run", str(viewer_scene.run_dir), "--data", str(tiny_dataset.root), "--port", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "mapping.yaml: objects ['object0', 'object1', 'object2'] differ from the run's ['cabinet', 'drawer']" in err
+    assert "fix: pass the dataset the run was trained on with --data" in err
+
+
+def test_the_viewer_finds_the_runs_language_table(monkeypatch, viewer_scene, bag_encoder):
+    pytest.importorskip("viser")
+    from stages.viewer.cli import build_parser, build_viewer
+
+    monkeypatch.setattr("stages.viewer.cli.encoder_from_args", lambda args: bag_encoder)
+    viewer = build_viewer(build_parser().parse_args(["--run", str(viewer_scene.run_dir), "--data",
+                                                     str(viewer_scene.data), "--port", "0"]))
+    try:
+        assert viewer.language.renders_language and viewer.language.run_encoder == bag_encoder.name
+        assert viewer.language.sources() == ["probs", "language", "language_objects"]
+        viewer.language.check_source("language")  # queries embedded like the targets: accepted
+        assert viewer.options.full_pixels == 128 * 96 and viewer.options.chunk_rays == 2048
+    finally:
+        viewer.stop()
+
+
+def test_the_viewer_starts_prints_its_address_and_stops(capsys, viewer_scene):
+    pytest.importorskip("viser")
+    code = main(["--run", str(viewer_scene.run_dir), "--data", str(viewer_scene.data), "--port", "0",
+                 "--no-encoder", "--threads", "1", "--stop-after", "0.5"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert re.search(r"livescene view: http://127\.0\.0\.1:\d+/ +\(2 objects: cabinet, drawer; full resolution "
+                     r"12288 pixels; Ctrl-C stops\)", out)
