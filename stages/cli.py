@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "control": ("stages.language.control_cli", "set object states from language commands"),
     "report": ("stages.report.cli", "write the self-contained HTML report"),
     "stability": ("stages.stability.cli", "run the numerical-stability suite and print its table"),
+    "view": ("stages.viewer.cli", "live browser viewer: object sliders, language commands, relevancy (viser)"),
 }
 
 
