@@ -1,4 +1,7 @@
-"""Does the camera move? Evidence from feature matches and from the reconstructed centres.
+"""Does the camera move? Evidence from COLMAP's feature matches (after matching, before mapping).
+
+The cheaper check before any COLMAP work is ``static_check``; the camera path
+of the finished model is judged by ``trajectory_check``.
 
 Triangulation needs a baseline. A tripod shot (or a phone held still) gives
 matches that barely move, and COLMAP then fails to initialise or builds a
@@ -72,30 +75,3 @@ def feature_motion(database: Path) -> FeatureMotion:
         db.close()
     return FeatureMotion(n_pairs=len(medians), max_median_px=max(medians, default=0.0),
                          rotation_only_fraction=rotation_only / n_verified if n_verified else 0.0)
-
-
-@dataclass
-class Baseline:
-    """Spread of the reconstructed camera centres against the depth of the scene."""
-
-    max_centre_distance: float
-    """Largest distance between two registered camera centres (model units)."""
-    median_depth: float
-    """Median distance from the cameras to the 3D points (model units)."""
-
-    @property
-    def ratio(self) -> float:
-        return self.max_centre_distance / self.median_depth if self.median_depth > 0 else 0.0
-
-
-def model_baseline(reconstruction: pycolmap.Reconstruction) -> Baseline:
-    centres = np.array([img.projection_center() for img in reconstruction.images.values() if img.has_pose])
-    if len(centres) < 2:
-        return Baseline(0.0, 0.0)
-    span = float(np.max(np.linalg.norm(centres[:, None] - centres[None], axis=-1)))
-    points = np.array([p.xyz for p in reconstruction.points3D.values()])
-    if len(points) == 0:
-        return Baseline(span, 0.0)
-    sample = points[:: max(1, len(points) // 2000)]
-    depth = float(np.median(np.linalg.norm(sample[None] - centres[:: max(1, len(centres) // 50), None], axis=-1)))
-    return Baseline(span, depth)

@@ -3,9 +3,9 @@
 Structure from motion recovers poses up to a similarity (scale, rotation,
 translation), so the reference is first brought into the estimate's world
 with a least-squares similarity fitted to the frames both files hold
-(matched by frame id). The centre error is then expressed in reference
-units relative to the scene extent, so it reads the same whatever unit
-COLMAP picked.
+(paired by name, or by order when asked: ``frame_matching``). The centre
+error is then expressed in reference units relative to the scene extent, so
+it reads the same whatever unit COLMAP picked.
 
 Two fits are offered. ``centres`` is the classic Umeyama fit to the camera
 centres alone (ATE style). Its rotation is poorly determined when the
@@ -27,23 +27,10 @@ import numpy as np
 import pycolmap
 
 from stages.scene import InputError, frame_id_of
-from stages.scene.transforms import camera_from_dict, load_json, parse_pose
 
 from .conventions import rotation_angle_deg
-
-
-def read_poses(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Frame id -> 4x4 OpenGL camera-to-world, and the top-level intrinsics of a transforms.json."""
-    data = load_json(Path(path))
-    frames = data.get("frames")
-    if not isinstance(frames, list) or not frames:
-        raise InputError(path, "no frames", "pass a transforms.json with a non-empty frames list")
-    poses = {}
-    for k, frame in enumerate(frames):
-        where = f"frame {k} ({frame.get('file_path', '?')})"
-        poses[frame_id_of(Path(str(frame.get("file_path", ""))).stem)] = parse_pose(
-            frame.get("transform_matrix"), Path(path), where)
-    return poses, data
+from .frame_matching import match_frames
+from .pose_sources import PoseEntry, read_pose_set
 
 
 def scene_extent(truth_path: Path, truth_centres: np.ndarray, extent: float | None) -> tuple[float, str]:
@@ -105,23 +92,22 @@ def similarity_from_poses(src: np.ndarray, tgt: np.ndarray) -> np.ndarray | None
 
 
 def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None,
-                  align: str = "poses") -> dict[str, Any]:
-    """Errors of ``pred_path`` poses against ``truth_path`` poses (both transforms.json).
+                  align: str = "poses", match: str = "id") -> dict[str, Any]:
+    """Errors of ``pred_path`` poses against ``truth_path`` poses.
 
-    ``align``: ``poses`` (centres and orientations) or ``centres`` (Umeyama on centres only).
+    Either side is a transforms.json or a COLMAP model folder. ``align``: ``poses`` (centres and
+    orientations) or ``centres`` (Umeyama on centres only). ``match``: ``id`` pairs frames by name
+    (frame id, image stem or image path, whichever pairs most), ``order`` by position.
     """
-    pred, pred_data = read_poses(pred_path)
-    truth, truth_data = read_poses(truth_path)
-    common = sorted(set(pred) & set(truth))
-    if len(common) < 3:
-        raise InputError(pred_path, f"only {len(common)} frame ids in common with {truth_path}",
-                         "compare poses of the same capture (frame ids = last '_' token of the image names)")
-    pred_c = np.array([pred[f][:3, 3] for f in common])
-    truth_c = np.array([truth[f][:3, 3] for f in common])
+    pred_set, truth_set = read_pose_set(pred_path), read_pose_set(truth_path)
+    matched = match_frames(pred_set, truth_set, match)
+    pred_m = np.array([p.c2w for p, _ in matched.pairs])
+    truth_m = np.array([t.c2w for _, t in matched.pairs])
+    pred_c, truth_c = pred_m[:, :3, 3], truth_m[:, :3, 3]
     if align == "centres":
         sim3 = similarity_from_centres(truth_c, pred_c)
     elif align == "poses":
-        sim3 = similarity_from_poses(np.array([truth[f] for f in common]), np.array([pred[f] for f in common]))
+        sim3 = similarity_from_poses(truth_m, pred_m)
     else:
         raise ValueError(f"unknown alignment {align!r}; use 'poses' or 'centres'")
     if sim3 is None:
@@ -130,22 +116,25 @@ def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None
     scale = float(np.cbrt(np.linalg.det(sim3[:3, :3])))
     rot = sim3[:3, :3] / scale
     aligned = truth_c @ sim3[:3, :3].T + sim3[:3, 3]
-    extent_value, extent_source = scene_extent(truth_path, truth_c, extent)
+    extent_value, extent_source = scene_extent(truth_set.path, truth_c, extent)
     centre_err = np.linalg.norm(pred_c - aligned, axis=1) / scale  # in reference units
     centre_rel = centre_err / extent_value
-    rot_err = np.array([rotation_angle_deg(pred[f][:3, :3], rot @ truth[f][:3, :3]) for f in common])
+    rot_err = np.array([rotation_angle_deg(p[:3, :3], rot @ t[:3, :3]) for p, t in zip(pred_m, truth_m, strict=True)])
 
-    cam_pred = camera_from_dict(pred_data, Path(pred_path), "top level")
-    cam_truth = camera_from_dict(truth_data, Path(truth_path), "top level")
+    cam_pred, cam_truth = pred_set.camera, truth_set.camera
     size_ratio = cam_truth.width / cam_pred.width  # frames may have been extracted downscaled
     fx, fy = cam_pred.fx * size_ratio, cam_pred.fy * size_ratio
+    pred_ids = [frame_label(p) for p, _ in matched.pairs]
+    truth_ids = [frame_label(t) for _, t in matched.pairs]
     return {
         "pred": str(pred_path),
         "truth": str(truth_path),
-        "n_matched": len(common),
-        "n_truth_frames": len(truth),
-        "n_pred_frames": len(pred),
-        "truth_frames_missing_in_pred": sorted(set(truth) - set(pred)),
+        "matched_by": matched.matched_by,
+        "match_counts": matched.counts,
+        "n_matched": len(matched.pairs),
+        "n_truth_frames": len(truth_set.entries),
+        "n_pred_frames": len(pred_set.entries),
+        "truth_frames_missing_in_pred": [frame_label(t) for t in matched.unmatched_truth],
         "alignment": align,
         "sim3": sim3.tolist(),
         "sim3_note": "maps reference (truth) world coordinates to predicted world coordinates: x_pred = sim3 @ x_truth",
@@ -161,15 +150,22 @@ def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None
             "relative_fx": abs(fx - cam_truth.fx) / cam_truth.fx,
             "relative_fy": abs(fy - cam_truth.fy) / cam_truth.fy,
         },
-        "per_frame": [{"frame": f, "centre_error_relative": float(c), "rotation_error_deg": float(r)}
-                      for f, c, r in zip(common, centre_rel, rot_err, strict=True)],
+        "per_frame": [{"frame": f, **({"truth_frame": tf} if tf != f else {}),
+                       "centre_error_relative": float(c), "rotation_error_deg": float(r)}
+                      for f, tf, c, r in zip(pred_ids, truth_ids, centre_rel, rot_err, strict=True)],
     }
+
+
+def frame_label(entry: PoseEntry) -> str:
+    """A frame's name in the report: its frame id (last ``_`` token of the stem), as before matching by name."""
+    return frame_id_of(Path(entry.file_path).stem) if entry.file_path else entry.label
 
 
 def summary_lines(report: dict[str, Any]) -> list[str]:
     c, r, f = report["centre_error_relative"], report["rotation_error_deg"], report["focal_error"]
     return [
-        f"frames matched: {report['n_matched']} of {report['n_truth_frames']} reference frames",
+        f"frames matched: {report['n_matched']} of {report['n_truth_frames']} reference frames "
+        f"(by {report['matched_by']})",
         f"camera centre error / scene extent ({report['scene_extent']:.3g}): mean {c['mean']:.3%}, "
         f"median {c['median']:.3%}, max {c['max']:.3%}",
         f"rotation error (deg): mean {r['mean']:.3f}, median {r['median']:.3f}, max {r['max']:.3f}",

@@ -11,3 +11,7 @@ class PoseQualityError(InputError):
 
 class StaticCameraError(InputError):
     """The camera does not move, so there is no baseline to triangulate from."""
+
+
+class DegenerateTrajectoryError(PoseQualityError):
+    """Frames registered, but the camera path is implausible (mostly one spot, or broken by jumps)."""

@@ -2,30 +2,67 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 from stages.scene import frame_id_of
 
-from .camera_motion import Baseline, FeatureMotion
-from .errors import PoseQualityError, StaticCameraError
+from .camera_motion import FeatureMotion
+from .config import PosesConfig
+from .errors import DegenerateTrajectoryError, PoseQualityError, StaticCameraError
+from .static_check import MotionPrecheck
+from .trajectory_check import TrajectoryJudgement
 
-REGISTRATION_ADVICE = (
-    "try `--matcher exhaustive` (pairs every frame with every other), capture with more overlap "
-    "(slower camera motion, or extract more frames with a smaller `livescene frames --stride`), "
-    "and sharper frames (check the sharpness column of frames.csv; avoid motion blur); "
-    "textureless walls need some texture in view"
-)
 STATIC_ADVICE = (
     "move the camera through the room (walk around, do not only turn on the spot): COLMAP needs "
     "translation between frames to triangulate; a fixed camera cannot be posed by structure from motion"
 )
 
 
-def compact_names(names: list[str], limit: int = 40) -> str:
-    """``frame_00003..frame_00007, frame_00012`` : consecutive frame ids as ranges, at most ``limit`` items."""
+def frames_all_kept(frames_dir: Path) -> bool:
+    """Whether `livescene frames` already kept every source frame (then a smaller --stride is no fix)."""
+    path = Path(frames_dir) / "frames.json"
+    try:
+        info = json.loads(path.read_text())
+        return int(info["n_frames"]) >= int(info["decoded_frame_count"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def registration_advice(cfg: PosesConfig, matcher: str) -> str:
+    """What to try after a registration failure, leaving out what this run already did (issue 17)."""
+    tries = []
+    if matcher != "exhaustive":
+        tries.append("`--matcher exhaustive` (pairs every frame with every other)")
+    if matcher == "sequential" and cfg.sequential_overlap <= PosesConfig.sequential_overlap:
+        tries.append(f"a larger `--overlap` (now {cfg.sequential_overlap})")
+    overlap = "capture with more overlap (slower camera motion"
+    overlap += ")" if frames_all_kept(cfg.frames_dir) else \
+        ", or extract more frames with a smaller `livescene frames --stride`)"
+    tries.append(overlap)
+    tries.append("sharper frames (check the sharpness column of frames.csv; avoid motion blur)")
+    advice = "try " + ", ".join(tries) + "; textureless walls need some texture in view"
+    if cfg.min_registered > 0.5:
+        advice += f" (or lower --min-registered, now {cfg.min_registered:g}, if a partial model is acceptable)"
+    return advice
+
+
+def too_few_frames_advice(frames_dir: Path) -> str:
+    if frames_all_kept(frames_dir):
+        return "film a longer clip (every frame of this one is already extracted)"
+    return "extract more frames (`livescene frames --stride 1`)"
+
+
+def compact_names(names: list[str], limit: int = 40, order: list[str] | None = None) -> str:
+    """``frame_00003..frame_00007 (5), frame_00012``: runs of frames as ranges, at most ``limit`` items.
+
+    A run is consecutive frame ids, or, with ``order`` (every frame in playback order), consecutive
+    positions in it: frames 1, 2, 4, 7 of a clip that skips 3, 5 and 6 are one run then.
+    """
+    position = {n: k for k, n in enumerate(order)} if order is not None else None
     items: list[str] = []
-    run: list[tuple[int, str]] = []
+    run: list[tuple[int | None, str]] = []
 
     def flush() -> None:
         if run:
@@ -33,14 +70,18 @@ def compact_names(names: list[str], limit: int = 40) -> str:
             run.clear()
 
     for name in names:
-        fid = frame_id_of(Path(name).stem)
-        idx = int(fid) if fid.isdigit() else None
+        if position is not None:
+            idx = position.get(name)
+        else:
+            fid = frame_id_of(Path(name).stem)
+            idx = int(fid) if fid.isdigit() else None
         stem = Path(name).stem
-        if run and idx is not None and run[-1][0] is not None and idx - run[-1][0] <= 1:
+        previous = run[-1][0] if run else None
+        if idx is not None and previous is not None and 0 <= idx - previous <= 1:
             run.append((idx, stem))
         else:
             flush()
-            run.append((idx, stem))  # type: ignore[arg-type]
+            run.append((idx, stem))
     flush()
     shown = ", ".join(items[:limit])
     return shown + (f", ... ({len(items) - limit} more runs)" if len(items) > limit else "")
@@ -61,21 +102,99 @@ def check_motion(motion: FeatureMotion, image_diagonal: float, min_fraction: flo
         )
 
 
-def check_baseline(baseline: Baseline, motion: FeatureMotion, frames_dir: Path, min_ratio: float = 0.01) -> None:
-    """Raise StaticCameraError for a model whose cameras sit (almost) on one spot."""
-    if baseline.median_depth > 0 and baseline.ratio < min_ratio:
+def check_precheck(pre: MotionPrecheck, names: list[str], frames_dir: Path) -> None:
+    """Raise StaticCameraError when the pre-SfM feature tracks show a camera that never moves."""
+    if not pre.static:
+        return
+    raise StaticCameraError(
+        frames_dir,
+        f"the camera does not move: in frames {Path(names[0]).stem}..{Path(names[-1]).stem} "
+        f"({len(names)} frames) the background shifts by at most {pre.max_still_px:.2f} px between any two of "
+        f"{pre.n_frames_sampled} sampled frames ({pre.n_pairs} pairs, images shrunk to {pre.long_side_px} px; "
+        f"{pre.still_threshold_px:.2f} px = the still limit), so there is no baseline to triangulate from "
+        f"(found in {pre.seconds:.1f} s, before structure from motion)",
+        STATIC_ADVICE,
+    )
+
+
+def check_trajectory(judged: TrajectoryJudgement, motion: FeatureMotion, pre: MotionPrecheck | None,
+                     cfg: PosesConfig, matcher: str) -> list[str]:
+    """Raise for an implausible camera path; return warnings (trimmed frames, a very wide path)."""
+    frames_dir = cfg.frames_dir
+    depth = judged.median_point_depth
+    if judged.verdict == "refuse" and judged.reason in ("static", "static after trim"):
         rotation = (f"; {motion.rotation_only_fraction:.0%} of matched pairs look like a camera turning on the "
                     "spot") if motion.rotation_only_fraction > 0 else ""
+        which = "all reconstructed camera centres" if judged.reason == "static" else \
+            f"after dropping the jumping frames {compact_names(judged.trimmed, order=judged.order)}, the other " \
+            "camera centres"
         raise StaticCameraError(
             frames_dir,
-            f"the camera does not move: all reconstructed camera centres lie within {baseline.ratio:.2%} of the "
-            f"scene depth of each other{rotation}, so the poses are degenerate",
+            f"the camera does not move: {which} lie within {judged.kept_baseline_ratio:.2%} of the scene depth "
+            f"(median point depth {depth:.3g}) of each other{rotation}, so the poses are degenerate",
             STATIC_ADVICE,
         )
+    if judged.verdict == "refuse" and judged.reason == "mostly still":
+        still = set(judged.still_frames)
+        moving = [n for n in judged.order if n not in still]
+        raise DegenerateTrajectoryError(frames_dir, _mostly_still_problem(judged, moving, pre),
+                                        _mostly_still_fix(judged, moving, pre))
+    if judged.verdict == "refuse" and judged.reason == "broken path":
+        pieces = "; ".join(f"{a}..{b} ({k})" if a != b else f"{a} (1)"
+                           for (a, b), k in zip(judged.pieces, judged.piece_sizes, strict=True))
+        raise DegenerateTrajectoryError(
+            frames_dir,
+            f"the camera path breaks into {len(judged.pieces)} pieces at jumps longer than {judged.jump_limit:.3g} "
+            f"units per frame ({cfg.jump_factor:g} x the typical step {judged.typical_step:.3g}; median point depth "
+            f"{depth:.3g}) and none holds a majority of the {judged.n_registered} cameras: {pieces}",
+            "the pieces do not connect: " + registration_advice(cfg, matcher),
+        )
+    out = []
+    if judged.verdict == "trim":
+        trimmed = compact_names(judged.trimmed, order=judged.order)
+        out.append(f"dropped {len(judged.trimmed)} frame(s) whose cameras jump away from their neighbours in time "
+                   f"({trimmed}): steps longer than {judged.jump_limit:.3g} units per frame "
+                   f"({cfg.jump_factor:g} x the typical step, median point depth {depth:.3g}); they get no pose")
+    if judged.spread_ratio > cfg.max_spread_ratio:
+        out.append(f"a camera lies {judged.spread_ratio:.1f} median point depths from the middle of the path "
+                   f"(limit {cfg.max_spread_ratio:g}): check the poses before training on them")
+    return out
+
+
+def _mostly_still_problem(judged: TrajectoryJudgement, moving: list[str], pre: MotionPrecheck | None) -> str:
+    k, n = len(judged.still_frames), judged.n_registered
+    spot = (f"the other {k} cameras ({compact_names(judged.still_frames, 6, judged.order)}), which sit within "
+            f"{judged.still_spread:.3g} units of each other (median point depth {judged.median_point_depth:.3g})")
+    if moving:
+        head = f"frames {compact_names(moving, 6, judged.order)} lie up to {judged.moving_reach:.3g} units from {spot}"
+    else:
+        head = f"{spot[len('the other '):]}"
+    turn = ""
+    if _turns_on_the_spot(pre):
+        turn = "; the frames that move show no parallax (a camera turning on the spot)"
+    limit = judged.limits["max_still_share"]
+    return (f"{head}: {k} of {n} registered frames ({k / n:.0%}, above {limit:.0%}) were filmed from one spot"
+            f", as in a tripod clip with a short pan{turn}, so most frames add no baseline and the "
+            "poses cannot be trusted")
+
+
+def _turns_on_the_spot(pre: MotionPrecheck | None) -> bool:
+    """Every sampled pair that moves fits a homography: rotation without translation (or a flat scene)."""
+    return pre is not None and pre.rotation_only_fraction == 1.0
+
+
+def _mostly_still_fix(judged: TrajectoryJudgement, moving: list[str], pre: MotionPrecheck | None) -> str:
+    fix = ("film the scene moving around the room (walk the camera along it, do not only turn it; a camera on a "
+           "tripod cannot be posed by structure from motion)")
+    # the moving frames alone only help when they translate: a pan's model baseline is COLMAP's guess
+    if judged.moving_usable and not _turns_on_the_spot(pre):
+        fix += (f", or cut the clip to the frames where the camera moves ({compact_names(moving, 6, judged.order)}) "
+                "and run `livescene frames` on that part")
+    return fix
 
 
 def check_registration(names: list[str], registered: set[str], min_fraction: float, frames_dir: Path,
-                       detail: str = "") -> float:
+                       detail: str = "", advice: str = "") -> float:
     """The registered fraction; raise PoseQualityError listing unregistered frames when it is too low."""
     fraction = len(registered) / len(names) if names else 0.0
     if fraction < min_fraction:
@@ -84,7 +203,7 @@ def check_registration(names: list[str], registered: set[str], min_fraction: flo
             frames_dir,
             f"only {len(registered)} of {len(names)} frames ({fraction:.0%}) received a pose, below the "
             f"required {min_fraction:.0%}{detail}; unregistered frames: {compact_names(missing)}",
-            REGISTRATION_ADVICE + " (or lower --min-registered if a partial model is acceptable)",
+            advice or "try `--matcher exhaustive`, more overlap between frames, sharper frames, texture in view",
         )
     return fraction
 

@@ -28,6 +28,8 @@ class SfmResult:
     """How many separate models the mapper produced (more than one = the sequence broke apart)."""
     matcher: str
     """The pairing actually used (sequential or exhaustive)."""
+    model_sizes: list[int] = field(default_factory=list)
+    """Registered images of every model, largest first."""
     timings: dict[str, float] = field(default_factory=dict)
     """Seconds per step: extract, match, map."""
 
@@ -143,4 +145,6 @@ def run_sfm(cfg: PosesConfig, database: Path, image_dir: Path, names: list[str],
         models = map_incrementally(cfg, database, image_dir, models_dir, len(names))
         timings["map"] = time.perf_counter() - t0
         bar.update()
-    return SfmResult(reconstruction=largest_model(models), n_models=len(models), matcher=matcher, timings=timings)
+    sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+    return SfmResult(reconstruction=largest_model(models), n_models=len(models), matcher=matcher, timings=timings,
+                     model_sizes=sizes)

@@ -10,8 +10,8 @@ from poses_testdata import orbit_poses, write_sequence
 
 from stages.poses import PosesConfig, StaticCameraError, estimate_poses
 from stages.poses.cli import main
-from stages.poses.quality_gate import compact_names, intrinsics_warnings
-from stages.scene import InputError
+from stages.poses.quality_gate import compact_names, intrinsics_warnings, registration_advice, too_few_frames_advice
+from stages.scene import InputError, write_json
 
 
 def test_too_short_sequence(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -48,7 +48,9 @@ def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pyte
     assert code == 2, err
     assert err.startswith(f"error: {frames}: only 8 of 12 frames (67%) received a pose, below the required 80%")
     assert "unregistered frames: frame_00008..frame_00011 (4)" in err
-    assert "--matcher exhaustive" in err and "overlap" in err and "sharper frames" in err
+    # 12 frames: auto matching was already exhaustive, so the advice must not suggest it again (issue 17)
+    assert "--matcher exhaustive" not in err and "overlap" in err and "sharper frames" in err
+    assert "lower --min-registered, now 0.8" in err
     assert not out.exists()
     # a lower bar accepts the partial model and records what is missing
     summary = estimate_poses(PosesConfig(frames_dir=frames, out_dir=out, threads=2, min_registered=0.6,
@@ -56,9 +58,31 @@ def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pyte
     assert summary["unregistered"] == [f"frame_{i:05d}.png" for i in range(8, 12)]
 
 
+def test_advice_leaves_out_what_was_tried(tmp_path: Path) -> None:
+    cfg = PosesConfig(frames_dir=tmp_path, out_dir=tmp_path / "out")
+    sequential = registration_advice(cfg, "sequential")
+    assert "`--matcher exhaustive`" in sequential and "a larger `--overlap` (now 10)" in sequential
+    assert "smaller `livescene frames --stride`" in sequential and "lower --min-registered, now 0.8" in sequential
+    exhaustive = registration_advice(cfg, "exhaustive")
+    assert "--matcher exhaustive" not in exhaustive and "--overlap" not in exhaustive
+    tried = PosesConfig(frames_dir=tmp_path, out_dir=tmp_path / "out", sequential_overlap=30, min_registered=0.5)
+    advice = registration_advice(tried, "sequential")
+    assert "--overlap" not in advice and "--min-registered" not in advice and "--matcher exhaustive" in advice
+    # every source frame already extracted: a smaller stride is no fix, for too few frames either
+    assert "--stride 1" in too_few_frames_advice(tmp_path)
+    write_json(tmp_path / "frames.json", {"n_frames": 20, "decoded_frame_count": 20})
+    assert "--stride" not in registration_advice(cfg, "sequential")
+    assert "film a longer clip" in too_few_frames_advice(tmp_path)
+
+
 def test_compact_names() -> None:
     names = [f"frame_{i:05d}.png" for i in (3, 4, 5, 9, 11, 12)]
     assert compact_names(names) == "frame_00003..frame_00005 (3), frame_00009, frame_00011..frame_00012 (2)"
+    # in playback order a clip that skips frames 6-8 and 10 still runs from 3 to 12
+    order = [f"frame_{i:05d}.png" for i in (1, 3, 4, 5, 9, 11, 12, 14)]
+    assert compact_names(names, order=order) == "frame_00003..frame_00012 (6)"
+    without_9 = names[:3] + names[4:]
+    assert compact_names(without_9, order=order) == "frame_00003..frame_00005 (3), frame_00011..frame_00012 (2)"
 
 
 def test_missing_frames_folder(tmp_path: Path) -> None:
