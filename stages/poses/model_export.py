@@ -1,7 +1,13 @@
-"""Write a COLMAP model as nerfstudio transforms.json, a PLY point cloud and a scene box."""
+"""Write a COLMAP model as nerfstudio transforms.json, a PLY point cloud and a scene box.
+
+Shared by ``livescene poses`` (a model it estimated) and ``livescene poses import`` (a model made
+elsewhere), so both write the same POSES folder (docs/data-contract.md).
+"""
 
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -10,7 +16,7 @@ import numpy as np
 import open3d as o3d
 import pycolmap
 
-from stages.scene import Camera, atomic_path
+from stages.scene import Camera, atomic_path, write_json
 from stages.scene.transforms import camera_to_dict
 
 from .conventions import c2w_opengl_from_cam_from_world
@@ -24,6 +30,8 @@ _MODELS: dict[str, tuple[tuple[int, int, int, int], tuple[str, ...]]] = {
     "OPENCV": ((0, 1, 2, 3), ("k1", "k2", "p1", "p2")),
 }
 SUPPORTED_CAMERA_MODELS = tuple(_MODELS)
+"""The COLMAP models whose projection the contract's Camera reproduces exactly: pinhole plus OpenCV
+radial-tangential distortion. Fisheye and other models bend rays differently (docs/poses.md)."""
 
 
 def scene_camera(camera: pycolmap.Camera) -> Camera:
@@ -49,21 +57,54 @@ def registered_poses(reconstruction: pycolmap.Reconstruction) -> dict[str, np.nd
     return out
 
 
-def transforms_dict(reconstruction: pycolmap.Reconstruction, source_index: dict[str, int | None],
-                    image_prefix: str = "images") -> dict[str, Any]:
-    """nerfstudio-form transforms.json content: shared intrinsics, one frame per registered image."""
-    cameras = list(reconstruction.cameras.values())
-    if len(cameras) != 1:
-        raise ValueError(f"expected one shared camera, the model has {len(cameras)}")
-    out: dict[str, Any] = camera_to_dict(scene_camera(cameras[0]))
+def relative_file_path(image: Path, out_dir: Path) -> str:
+    """``file_path`` of ``image`` relative to the folder transforms.json is written to.
+
+    nerfstudio resolves ``file_path`` as ``<folder of transforms.json> / file_path`` (so does
+    ``stages.scene.transforms.resolve_image_path``): a POSES folder next to a FRAMES folder names
+    ``../frames/images/frame_00001.png``, and ``ns-train --data POSES`` finds the images.
+    ``out_dir`` need not exist yet (outputs are written into a temporary sibling first).
+    """
+    image = Path(os.path.abspath(image))
+    out_dir = Path(os.path.abspath(out_dir))
+    return Path(os.path.relpath(image, out_dir)).as_posix()
+
+
+def transforms_dict(reconstruction: pycolmap.Reconstruction, source_index: Mapping[str, int | None],
+                    image_prefix: str = "images", *, image_dir: Path | None = None, out_dir: Path | None = None,
+                    file_paths: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """nerfstudio-form transforms.json content: intrinsics, one frame per registered image.
+
+    ``file_path`` of a frame: ``file_paths[name]`` when given (images not in it are left out), else
+    the image in ``image_dir`` relative to ``out_dir`` when both are given (see
+    ``relative_file_path``), else ``image_prefix/name``. One camera gives shared intrinsics at the
+    top level; several give per-frame intrinsics (nerfstudio reads a key per frame when the top
+    level lacks it).
+    """
+    cameras = {cid: scene_camera(cam) for cid, cam in reconstruction.cameras.items()}
+    posed = sorted(registered_poses(reconstruction).items())
+    if file_paths is not None:
+        posed = [(name, c2w) for name, c2w in posed if name in file_paths]
+    images = {name: reconstruction.find_image_with_name(name) for name, _ in posed}
+    used = sorted({images[name].camera_id for name, _ in posed}) or sorted(cameras)
+    shared = cameras[used[0]] if len(used) == 1 else None
+    out: dict[str, Any] = camera_to_dict(shared) if shared is not None else {
+        "camera_model": "OPENCV" if any(cameras[c].has_distortion for c in used) else "PINHOLE"}
     frames = []
-    for name, c2w in sorted(registered_poses(reconstruction).items()):
-        image = reconstruction.find_image_with_name(name)
-        frame: dict[str, Any] = {
-            "file_path": f"{image_prefix}/{name}",
-            "transform_matrix": c2w.tolist(),
-            "colmap_im_id": int(image.image_id),
-        }
+    for name, c2w in posed:
+        image = images[name]
+        if file_paths is not None:
+            path = file_paths[name]
+        elif image_dir is not None and out_dir is not None:
+            path = relative_file_path(Path(image_dir) / name, Path(out_dir))
+        else:
+            path = f"{image_prefix}/{name}"
+        frame: dict[str, Any] = {"file_path": path, "transform_matrix": c2w.tolist(),
+                                 "colmap_im_id": int(image.image_id)}
+        if shared is None:
+            intrinsics = camera_to_dict(cameras[image.camera_id])
+            intrinsics.pop("camera_model")  # nerfstudio reads the model from the top level only
+            frame.update(intrinsics)
         if source_index.get(name) is not None:
             frame["source_index"] = int(source_index[name])  # type: ignore[arg-type]
         frames.append(frame)
@@ -109,3 +150,25 @@ def scene_box(cloud: o3d.geometry.PointCloud, camera_centres: np.ndarray, nb_nei
     info = {"points_total": n, "points_kept": len(kept.points), "nb_neighbors": nb_neighbors,
             "std_ratio": std_ratio, "includes_camera_centres": bool(len(camera_centres))}
     return box, info
+
+
+def write_model_outputs(out: Path, reconstruction: pycolmap.Reconstruction, transforms: dict[str, Any],
+                        source: str) -> dict[str, Any]:
+    """Write sparse/0, transforms.json, points3D.ply and scene.json into ``out``; return scene.json.
+
+    ``transforms`` is ``transforms_dict``'s result for this model; the scene box holds the points
+    (outliers removed) and the camera centres of its frames.
+    """
+    sparse = out / "sparse" / "0"
+    sparse.mkdir(parents=True, exist_ok=True)
+    reconstruction.write(output_dir=sparse)
+    write_json(out / "transforms.json", transforms)
+    cloud = point_cloud(reconstruction)
+    write_ply(cloud, out / "points3D.ply")
+    centres = np.array([f["transform_matrix"] for f in transforms["frames"]]).reshape(-1, 4, 4)[:, :3, 3]
+    box, box_info = scene_box(cloud, centres)
+    scene = {"scene_box": box.tolist(), "units": "colmap",
+             "scene_box_rule": "open3d statistical outlier removal on points3D, grown to include the camera centres",
+             **box_info, "source": source}
+    write_json(out / "scene.json", scene)
+    return scene

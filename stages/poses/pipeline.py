@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -13,24 +14,61 @@ import pycolmap
 
 from stages.scene import atomic_dir, write_json
 
-from .camera_motion import FeatureMotion, feature_motion, model_baseline
+from .camera_motion import FeatureMotion, feature_motion
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
-from .frame_list import read_frame_list
+from .frame_list import FrameList, read_frame_list
 from .model_export import point_cloud, registered_poses, scene_box, transforms_dict, write_ply
-from .quality_gate import check_baseline, check_motion, check_registration, intrinsics_warnings
-from .sfm import run_sfm
+from .quality_gate import (
+    STATIC_ADVICE,
+    check_motion,
+    check_precheck,
+    check_registration,
+    check_trajectory,
+    compact_names,
+    intrinsics_warnings,
+    registration_advice,
+    too_few_frames_advice,
+)
+from .sfm import SfmResult, run_sfm
+from .static_check import MotionPrecheck, measure_motion
+from .trajectory_check import TrajectoryJudgement, judge_trajectory, median_point_depth
 
 STAGE_VERSION = "1"
 MIN_FRAMES = 3
 
 
+def time_order(frames: FrameList) -> tuple[list[str], dict[str, float]]:
+    """Frame names in playback order with their time: the source index, or the position in name order."""
+    index = frames.source_index
+    if all(index[n] is not None for n in frames.names):
+        ordered = sorted(frames.names, key=lambda n: (index[n], n))
+        return ordered, {n: float(index[n]) for n in ordered}  # type: ignore[arg-type]
+    return list(frames.names), {n: float(k) for k, n in enumerate(frames.names)}
+
+
+def judge_model(rec: pycolmap.Reconstruction, ordered: list[str], times: dict[str, float], registered: set[str],
+                sfm: SfmResult, cfg: PosesConfig) -> TrajectoryJudgement:
+    """The trajectory gate's numbers for the registered cameras of ``rec`` (in playback order)."""
+    order = [n for n in ordered if n in registered]
+    centres = np.array([rec.find_image_with_name(n).projection_center() for n in order]).reshape(-1, 3)
+    points = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
+    return judge_trajectory(order, centres, np.array([times[n] for n in order]), median_point_depth(centres, points),
+                            len(ordered), sfm.model_sizes, cfg.trajectory_settings())
+
+
+def drop_frames(rec: pycolmap.Reconstruction, names: list[str]) -> None:
+    """Deregister the images ``names`` (trimmed by the gate): sparse/0 and transforms.json then agree."""
+    for name in names:
+        rec.deregister_frame(rec.find_image_with_name(name).frame_id)
+
+
 def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
     """Run the stage; write ``cfg.out_dir`` atomically and return the content of poses.json.
 
-    Raises StaticCameraError for a camera without baseline and
-    PoseQualityError when fewer than ``cfg.min_registered`` of the frames
-    get a pose; nothing is written then.
+    Raises StaticCameraError for a camera without baseline (from feature tracks before COLMAP runs, or from
+    the model), DegenerateTrajectoryError for an implausible camera path, and PoseQualityError when fewer
+    than ``cfg.min_registered`` of the frames get a pose; nothing is written then.
     """
     from stages.scene import InputError
 
@@ -39,11 +77,22 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
     names = frames.names
     if len(names) < MIN_FRAMES:
         raise InputError(frames.image_dir, f"only {len(names)} frame(s); structure from motion needs at least "
-                         f"{MIN_FRAMES} views with overlap", "extract more frames (`livescene frames --stride 1`)")
+                         f"{MIN_FRAMES} views with overlap", too_few_frames_advice(cfg.frames_dir))
     first = cv2.imread(str(frames.image_dir / names[0]), cv2.IMREAD_GRAYSCALE)
     if first is None:
         raise InputError(frames.image_dir / names[0], "image unreadable", "re-extract the frames")
     diagonal = float(np.hypot(*first.shape))
+    ordered, times = time_order(frames)
+    # a still camera is refused here in seconds, not after minutes of COLMAP (docs/poses.md, Quality gate)
+    pre = measure_motion(frames.image_dir, ordered, cfg.static_motion_fraction, cfg.masks_dir)
+    check_precheck(pre, ordered, cfg.frames_dir)
+    warnings_: list[str] = []
+    if pre.still_pair_fraction > cfg.max_still_share:
+        warnings_.append(f"{pre.still_pair_fraction:.0%} of neighbouring sampled frames show no camera motion "
+                         f"({', '.join(pre.still_spans[:6])}{', ...' if len(pre.still_spans) > 6 else ''}): a clip "
+                         "filmed mostly from one spot is "
+                         "refused after structure from motion")
+        print(f"warning: {warnings_[-1]}", file=sys.stderr)  # now, so that a user can stop a long run
     motion_holder: dict[str, FeatureMotion] = {}
 
     def after_matching(database: Path) -> None:
@@ -55,7 +104,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         work.mkdir()
         mask_stats = None
         mask_dir = None
-        timings: dict[str, float] = {}
+        timings: dict[str, float] = {"precheck": pre.seconds}
         if cfg.masks_dir is not None:
             t0 = time.perf_counter()
             mask_dir = work / "masks"
@@ -67,22 +116,27 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         motion = motion_holder["motion"]
         rec = sfm.reconstruction
         registered = set(registered_poses(rec)) if rec is not None else set()
-        if rec is not None and len(registered) >= 2:
-            check_baseline(model_baseline(rec), motion, cfg.frames_dir)
-        detail = "" if rec is not None else " (COLMAP found no pair of frames to start a model from)"
-        if sfm.n_models > 1:
-            detail += f" (the sequence broke into {sfm.n_models} separate models; the largest is kept)"
+        detail, advice = registration_detail(rec, sfm, pre, cfg)
         # even with --min-registered 0 a model needs two posed frames to be a model at all
-        fraction = check_registration(names, registered, max(cfg.min_registered, 2 / len(names)), cfg.frames_dir,
-                                      detail)
+        min_fraction = max(cfg.min_registered, 2 / len(names))
+        check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
         assert rec is not None  # the gate above rejects an empty result
+        judged = judge_model(rec, ordered, times, registered, sfm, cfg)
+        warnings_ += check_trajectory(judged, motion, pre, cfg, sfm.matcher)
+        drop_frames(rec, judged.trimmed)
+        registered -= set(judged.trimmed)
+        if judged.trimmed:
+            dropped = compact_names(judged.trimmed, order=ordered)
+            detail += f" ({len(judged.trimmed)} frames dropped as jumps: {dropped})"
+        fraction = check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
 
         t0 = time.perf_counter()
         sparse = out / "sparse" / "0"
         sparse.mkdir(parents=True)
         rec.write(output_dir=sparse)
-        transforms = transforms_dict(rec, frames.source_index)
-        warnings_ = intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
+        # file_path relative to the final folder (not the atomic temp one): ns-train --data POSES resolves it
+        transforms = transforms_dict(rec, frames.source_index, image_dir=frames.image_dir, out_dir=cfg.out_dir)
+        warnings_ += intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
         write_json(out / "transforms.json", transforms)
         cloud = point_cloud(rec)
         write_ply(cloud, out / "points3D.ply")
@@ -107,7 +161,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
             "n_registered": len(registered),
             "registered_fraction": fraction,
             "registered": sorted(registered),
-            "unregistered": [n for n in names if n not in registered],
+            "unregistered": [n for n in names if n not in registered and n not in judged.trimmed],
+            "trimmed": judged.trimmed,
             "mean_reprojection_error": float(rec.compute_mean_reprojection_error()),
             "n_points3D": int(rec.num_points3D()),
             "mean_track_length": float(rec.compute_mean_track_length()),
@@ -116,6 +171,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
             "camera": {"model": next(iter(rec.cameras.values())).model.name,
                        "params": [float(p) for p in next(iter(rec.cameras.values())).params]},
             "feature_motion": motion.as_dict(),
+            "motion_precheck": pre.as_dict(),
+            "trajectory": judged.as_dict(),
             "masks": None if mask_stats is None else {
                 "frames_with_masks": mask_stats.frames_with_masks,
                 "frames_without_masks": mask_stats.frames_without_masks,
@@ -133,3 +190,17 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         }
         write_json(out / "poses.json", summary)
     return summary
+
+
+def registration_detail(rec: pycolmap.Reconstruction | None, sfm: SfmResult, pre: MotionPrecheck,
+                        cfg: PosesConfig) -> tuple[str, str]:
+    """What the registration error adds to its numbers, and the advice that fits what was tried."""
+    detail = "" if rec is not None else " (COLMAP found no pair of frames to start a model from)"
+    if sfm.n_models > 1:
+        detail += f" (the sequence broke into {sfm.n_models} separate models; the largest is kept)"
+    advice = registration_advice(cfg, sfm.matcher)
+    if pre.rotation_only_fraction == 1.0:
+        # every moving pair fits a homography: a camera turning on the spot has nothing to triangulate
+        detail += " (every sampled frame pair that moves shows no parallax: the camera turns on the spot)"
+        advice = STATIC_ADVICE + "; else " + advice
+    return detail, advice

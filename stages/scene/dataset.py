@@ -3,7 +3,10 @@
 Layout (that of the published LiveScene sets, plus optional extensions)::
 
     transforms.json        nerfstudio or Blender form; frames may carry
-                           "state" {object: value}, "split", "source_index"
+                           "state" {object: value}, "split", "source_index";
+                           top level: train/val/test_filenames (nerfstudio's
+                           split, mirrors "split"), applied_transform,
+                           ply_file_path
     images/                one image per frame, frame id = last "_" token of the stem
     masks/<fid>.npy        bool H x W x (objects + 1), background last
     mapping.yaml           {int_id: object name}; channel order = sorted ids
@@ -15,6 +18,7 @@ Layout (that of the published LiveScene sets, plus optional extensions)::
 from __future__ import annotations
 
 import json
+import posixpath
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,8 +32,22 @@ from .camera import Camera
 from .errors import SceneError
 from .keyframes import frame_id_of, read_key_frames, write_key_frames
 from .masks import mask_path, read_mask
-from .transforms import camera_from_dict, camera_to_dict, load_json, parse_pose, resolve_image_path
+from .transforms import (
+    camera_from_dict,
+    camera_to_dict,
+    check_camera_model,
+    load_json,
+    parse_pose,
+    resolve_image_path,
+)
 from .yaml_io import read_yaml_mapping
+
+NERFSTUDIO_KEYS = ("applied_transform", "applied_scale", "ply_file_path", "orientation_override")
+"""Top-level transforms.json keys of nerfstudio that this project does not interpret but keeps on a
+read-write round trip (they describe the world of the poses, which no stage here changes)."""
+SPLIT_KEYS = {"train_filenames": "train", "val_filenames": "test", "test_filenames": "test"}
+"""nerfstudio's split lists -> this project's per-frame split. nerfstudio evaluates on ``val`` while
+training and on ``test`` in ``ns-eval``, so both name the held-out frames."""
 
 
 @dataclass
@@ -71,6 +89,10 @@ class SceneDataset:
     prompts: dict[str, dict[str, Any]] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
     """Other scene.json fields (units, normalisation, provenance, ...)."""
+    nerfstudio: dict[str, Any] = field(default_factory=dict)
+    """Top-level transforms.json keys of nerfstudio as read: ``NERFSTUDIO_KEYS`` are written back (an
+    absent ``applied_transform`` as the identity: the poses' world is the data's own); the split
+    lists are only checked, ``write_scene`` writes them anew from the frames' splits."""
 
     def __post_init__(self) -> None:
         if not self.object_ids:
@@ -158,6 +180,7 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
         img = cv2.imread(str(resolve_image_path(root, first)), cv2.IMREAD_UNCHANGED)
         if img is not None:
             image_hw = img.shape[:2]
+    check_camera_model(data, tpath, "top level")  # also when the intrinsics are per frame
     shared = None
     if any(k in data for k in ("fl_x", "camera_angle_x")):
         shared = camera_from_dict(data, tpath, "top level", image_hw)
@@ -199,6 +222,13 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
         frames.append(Frame(file_path=str(fr["file_path"]), c2w=c2w, state=state, split=split, camera=cam,
                             source_index=None if src is None else int(src)))
     camera = shared or frames[0].camera  # type: ignore[assignment]
+    _apply_split_lists(data, frames, tpath)
+    nerfstudio = {k: data[k] for k in (*NERFSTUDIO_KEYS, *SPLIT_KEYS) if k in data}
+    if "applied_transform" in nerfstudio:
+        m = np.asarray(nerfstudio["applied_transform"], dtype=np.float64)
+        if m.shape not in ((3, 4), (4, 4)) or not np.isfinite(m).all():
+            raise SceneError(tpath, f"applied_transform has shape {m.shape} or non-finite entries, expected 3x4",
+                             "write nerfstudio's 3x4 applied_transform, or drop the key if the world was not changed")
     if clamped:
         shown = "; ".join(clamped[:10]) + (f"; and {len(clamped) - 10} more" if len(clamped) > 10 else "")
         warnings.warn(f"{tpath}: states outside [0, 1] clamped to [0, 1] in {len(clamped)} frame(s): {shown}; fix: "
@@ -219,10 +249,48 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
 
     key_frames = read_key_frames(root / "key_frame_value.yaml", objects or None)
     ds = SceneDataset(root=root, camera=camera, frames=frames, objects=objects, object_ids=object_ids,
-                      key_frames=key_frames, scene_box=scene_box, prompts=prompts, meta=meta)
+                      key_frames=key_frames, scene_box=scene_box, prompts=prompts, meta=meta, nerfstudio=nerfstudio)
     if validate:
         validate_scene(ds, deep=deep)
     return ds
+
+
+def _apply_split_lists(data: dict[str, Any], frames: list[Frame], tpath: Path) -> None:
+    """Per-frame split from nerfstudio's ``train/val/test_filenames`` (compared as paths from the
+    dataset folder); a frame whose own ``split`` disagrees with the lists is an error."""
+    by_path = {posixpath.normpath(f.file_path): f for f in frames}
+    listed: dict[str, tuple[str, str]] = {}
+    for key, split in SPLIT_KEYS.items():
+        names = data.get(key)
+        if names is None:
+            continue
+        if not isinstance(names, list):
+            raise SceneError(tpath, f"{key} is not a list of file paths", f"write \"{key}\": [file_path, ...]")
+        for n in names:
+            norm = posixpath.normpath(str(n))
+            if norm not in by_path:
+                continue  # validate_scene names it, after the checks of the frames themselves
+            if norm in listed and listed[norm][1] != split:
+                raise SceneError(tpath, f"{n} is in both {listed[norm][0]} and {key}",
+                                 "put every frame in one split only")
+            listed[norm] = (key, split)
+    for norm, (key, split) in listed.items():
+        frame = by_path[norm]
+        if frame.split is None:
+            frame.split = split
+        elif frame.split != split:
+            raise SceneError(tpath, f"frame {frame.file_path} has split {frame.split!r} but is listed in {key}",
+                             "regenerate the file (`livescene scene assemble` writes both from one split)")
+
+
+def split_lists(frames: list[Frame]) -> dict[str, list[str]]:
+    """nerfstudio's split keys for frames that carry a split (a frame without one trains, as in
+    ``SceneDataset.frames_in``); empty when no frame says."""
+    if all(f.split is None for f in frames):
+        return {}
+    test = [f.file_path for f in frames if f.split == "test"]
+    return {"train_filenames": [f.file_path for f in frames if (f.split or "train") == "train"],
+            "val_filenames": test, "test_filenames": test}
 
 
 def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
@@ -243,6 +311,16 @@ def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
             if unknown:
                 raise SceneError(tpath, f"frame {f.file_path}: state names unknown objects {unknown}",
                                  f"use the names of mapping.yaml {ds.objects}")
+    known = {posixpath.normpath(f.file_path) for f in ds.frames}
+    for key in SPLIT_KEYS:
+        unknown = [n for n in ds.nerfstudio.get(key, []) if posixpath.normpath(str(n)) not in known]
+        if unknown:
+            raise SceneError(tpath, f"{key} names {len(unknown)} image(s) that no frame has, e.g. {unknown[:3]}",
+                             f"list the file_path of frames in {key} (nerfstudio refuses unknown names too)")
+    ply = ds.nerfstudio.get("ply_file_path")
+    if ply is not None and not (ds.root / str(ply)).is_file():
+        raise SceneError(tpath, f"ply_file_path {ply!r} names no file in {ds.root}",
+                         "copy the point cloud next to transforms.json or drop ply_file_path")
     if deep:
         for f in ds.frames:
             img = cv2.imread(str(ds.image_path(f)), cv2.IMREAD_UNCHANGED)
@@ -299,6 +377,10 @@ def write_scene(ds: SceneDataset, root: str | Path | None = None) -> Path:
             entry["source_index"] = int(f.source_index)
         frames_out.append(entry)
     tdata["frames"] = frames_out
+    tdata.update(split_lists(ds.frames))
+    tdata["applied_transform"] = np.eye(4)[:3].tolist()  # the world of the poses, unchanged
+    kept = {k: v for k, v in ds.nerfstudio.items() if k in NERFSTUDIO_KEYS}
+    tdata.update(json.loads(json.dumps(kept, default=_np_default)))
     write_json(root / "transforms.json", tdata)
     if ds.objects:
         write_yaml(root / "mapping.yaml", {int(i): n for i, n in zip(ds.object_ids, ds.objects, strict=True)})

@@ -5,6 +5,12 @@ nerfstudio form: shared ``fl_x, fl_y, cx, cy, w, h`` (+ ``k1.. p2``) and
 ``camera_angle_x`` and frames whose ``file_path`` may lack an extension
 (``./images/frame_00012`` with ``.png`` implied). Per-frame intrinsics in
 nerfstudio form override the shared ones.
+
+``file_path`` is resolved from the folder the file is in, as nerfstudio does
+(``data_dir / file_path``), so ``../frames/images/frame_00001.png`` is valid.
+``camera_model`` is honoured: the perspective models read as a pinhole with
+OpenCV radial-tangential distortion (the six coefficients nerfstudio reads for
+them); fisheye and panoramic models are refused (docs/data-contract.md).
 """
 
 from __future__ import annotations
@@ -19,6 +25,15 @@ from .camera import DISTORTION_KEYS, Camera
 from .errors import SceneError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG")
+PERSPECTIVE_MODELS = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV")
+"""nerfstudio's ``camera_model`` values it treats as a perspective camera with k1..k4, p1, p2."""
+UNSUPPORTED_MODELS = ("OPENCV_FISHEYE", "FISHEYE624", "EQUIRECTANGULAR", "OMNIDIRECTIONALSTEREO_L",
+                      "OMNIDIRECTIONALSTEREO_R", "VR180_L", "VR180_R", "ORTHOPHOTO")
+"""nerfstudio models whose rays are not pinhole + radial-tangential: reading their coefficients as
+OpenCV's would bend every ray, so they are refused instead."""
+UNDISTORT_FIX = ("undistort the images to a pinhole camera first (`colmap image_undistorter`, then "
+                 "`livescene poses import` of the undistorted model; or `livescene poses` on the undistorted "
+                 "images) and write camera_model PINHOLE or OPENCV")
 
 
 def load_json(path: Path) -> dict[str, Any]:
@@ -33,8 +48,46 @@ def load_json(path: Path) -> dict[str, Any]:
     return data
 
 
+def check_camera_model(d: dict[str, Any], path: Path, where: str) -> str:
+    """The ``camera_model`` of ``d`` (PINHOLE when absent, as nerfstudio assumes), or a SceneError."""
+    model = d.get("camera_model", "PINHOLE")
+    if model in PERSPECTIVE_MODELS:
+        return str(model)
+    if model in UNSUPPORTED_MODELS:
+        raise SceneError(path, f"{where}: camera_model {model} is not supported (LiveScene's rays are pinhole with "
+                         "OpenCV radial-tangential distortion; its coefficients would be misread)", UNDISTORT_FIX)
+    raise SceneError(path, f"{where}: unknown camera_model {model!r}",
+                     f"write one of {', '.join(PERSPECTIVE_MODELS)} (nerfstudio's names)")
+
+
+def _distortion(d: dict[str, Any], path: Path, where: str) -> dict[str, float]:
+    """k1..k4, p1, p2 from named keys or nerfstudio's ``distortion_params`` list [k1, k2, k3, k4, p1, p2]."""
+    if "distortion_params" in d and not any(k in d for k in DISTORTION_KEYS):
+        params = d["distortion_params"]
+        if not isinstance(params, list) or len(params) != 6:
+            raise SceneError(path, f"{where}: distortion_params is not a list of 6 numbers [k1, k2, k3, k4, p1, p2]",
+                             "write the six coefficients or the named keys k1, k2, k3, k4, p1, p2")
+        values = dict(zip(("k1", "k2", "k3", "k4", "p1", "p2"), params, strict=True))
+    else:
+        values = {k: d[k] for k in DISTORTION_KEYS if k in d}
+    out = {}
+    for k, v in values.items():
+        try:
+            value = float(v)
+        except (TypeError, ValueError) as exc:
+            raise SceneError(path, f"{where}: distortion coefficient {k} = {v!r} is not a number",
+                             "re-export the camera intrinsics") from exc
+        if not np.isfinite(value):
+            raise SceneError(path, f"{where}: distortion coefficient {k} is not finite",
+                             "re-export the camera intrinsics")
+        if value != 0.0:
+            out[k] = value
+    return out
+
+
 def camera_from_dict(d: dict[str, Any], path: Path, where: str, image_hw: tuple[int, int] | None = None) -> Camera:
     """Intrinsics from a nerfstudio- or Blender-style dictionary."""
+    check_camera_model(d, path, where)
     if "camera_angle_x" in d and "fl_x" not in d:
         if image_hw is None and not ("w" in d and "h" in d):
             raise SceneError(path, f"{where}: Blender form without w/h and no image to read the size from",
@@ -56,8 +109,7 @@ def camera_from_dict(d: dict[str, Any], path: Path, where: str, image_hw: tuple[
     if fx <= 0 or fy <= 0 or w <= 0 or h <= 0:
         raise SceneError(path, f"{where}: focal length and image size must be positive",
                          "re-export the camera intrinsics")
-    dist = {k: float(d[k]) for k in DISTORTION_KEYS if k in d and float(d[k]) != 0.0}
-    return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=w, height=h, distortion=dist)
+    return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=w, height=h, distortion=_distortion(d, path, where))
 
 
 def camera_to_dict(camera: Camera) -> dict[str, Any]:

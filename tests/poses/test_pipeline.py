@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import cv2
@@ -41,7 +42,10 @@ def test_outputs_follow_the_contract(room_poses: Path, room_sequence: Room) -> N
                                                                           "points3D.bin"}
     assert not (room_poses / "colmap_work").exists()
     transforms = json.loads((room_poses / "transforms.json").read_text())
-    assert [f["file_path"] for f in transforms["frames"]] == [f"images/{n}" for n in names]
+    # relative to the poses folder, so nerfstudio finds the frames' images from there
+    assert [f["file_path"] for f in transforms["frames"]] == [
+        os.path.relpath(room_sequence[0] / "images" / n, room_poses) for n in names]
+    assert all((room_poses / f["file_path"]).is_file() for f in transforms["frames"])
     assert [f["source_index"] for f in transforms["frames"]] == list(range(len(names)))
     assert transforms["w"] == SMALL_CAMERA.width and transforms["h"] == SMALL_CAMERA.height
     cloud = o3d.io.read_point_cloud(str(room_poses / "points3D.ply"))
