@@ -84,6 +84,17 @@ def section_poses(sd: SceneData) -> str:
             ["3D points", fmt(p.get("n_points3D"))],
             ["matcher", fmt(p.get("matcher"))],
             ["COLMAP seconds", fmt((p.get("timings") or {}).get("total"), 1)]]
+    if p.get("source") == "import":
+        rows.append(["source", "imported COLMAP model (no SfM)"])
+    t = p.get("trajectory") or {}
+    if t:  # the numbers the pose gate judged (docs/poses.md, "Quality gate")
+        reason = f": {escape(t['reason'])}" if t.get("reason") else ""
+        rows += [["gate verdict", escape(str(t.get("verdict"))) + reason],
+                 ["baseline ratio (camera spread / median point depth)", fmt(t.get("baseline_ratio"))],
+                 ["share of frames in the largest model", fmt(t.get("largest_model_share"))],
+                 ["share of cameras resting on one spot", fmt(t.get("still_share"))],
+                 ["longest step / typical step", fmt(t.get("max_step_ratio"))],
+                 ["frames trimmed as jumps", escape(", ".join(t.get("trimmed") or []) or "none")]]
     html = table(["COLMAP", "value"], rows)
     if sd.pose_error is None:
         html += missing(_why_skipped(sd, "pose_compare"))
