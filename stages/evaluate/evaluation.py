@@ -136,7 +136,8 @@ class Evaluator:
         lpips = Lpips()
         records, kept = [], []
         render_seconds = 0.0
-        # a learned-state run renders a held-out frame at the state it learned for that frame index (METHOD.md 6)
+        # a learned-state run renders a held-out frame at the state it learned for that frame index
+        # (docs/method.md section 6)
         learned = getattr(self.run, "state_mode", "given") == "learned"
         for frame in tqdm(frames, desc="held-out views", unit="view"):
             gt = self._image(frame)

@@ -62,11 +62,8 @@ class TruthSource:
     def from_capture(cls, capture_dir: str | Path, pose_alignment: str | Path | None = None,
                      same_world: bool = True) -> TruthSource:
         capture_dir = Path(capture_dir)
-        try:
-            from stages.capture import TruthRenderer
-        except ImportError as exc:
-            raise InputError(capture_dir, f"the capture stage cannot be imported ({exc})",
-                             "install stages.capture, or evaluate without --truth") from exc
+        from stages.capture import TruthRenderer  # imported on use: only an evaluation with --truth needs it
+
         tpath = capture_dir / "truth" / "transforms.json"
         if not tpath.is_file():
             raise InputError(tpath, "no truth transforms.json in this capture",

@@ -1,6 +1,6 @@
 """Grounding: a text query -> a relevancy map over a rendered view.
 
-Two sources of evidence, after METHOD.md section 7:
+Two sources of evidence, after docs/method.md section 7:
 
 - ``probs`` (every run): the query is scored against each object's phrases
   (name, synonyms, description, state phrases); a softmax over objects with

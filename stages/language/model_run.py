@@ -21,11 +21,8 @@ def load_model_run(run_dir: str | Path, device: str = "cpu") -> Any:
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise InputError(run_dir, "run folder not found", "train one with `livescene train --data DS --out RUN`")
-    try:
-        from stages.model import load_run
-    except ImportError as exc:
-        raise InputError(run_dir, f"the model stage cannot be imported ({exc})",
-                         "install the project with its stages.model package") from exc
+    from stages.model import load_run  # imported on use: the language stage's other commands need no torch
+
     return load_run(run_dir, device=device)
 
 

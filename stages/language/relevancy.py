@@ -4,7 +4,7 @@ LERF scores an embedding ``e`` against a query ``q`` by pairwise softmaxes
 against canonical negatives: ``min_i exp(t e.q) / (exp(t e.q) + exp(t e.n_i))``
 = ``min_i sigmoid(t (e.q - e.n_i))``. 0.5 means "as much like the query as
 like the closest negative". LiveScene's reference uses the negatives
-"object", "things", "stuff", "texture" and temperature 10 (METHOD.md section 7).
+"object", "things", "stuff", "texture" and temperature 10 (docs/method.md section 7).
 """
 
 from __future__ import annotations

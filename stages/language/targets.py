@@ -1,4 +1,4 @@
-"""Language targets for the interaction-aware language table (METHOD.md section 7).
+"""Language targets for the interaction-aware language table (docs/method.md section 7).
 
 With a text-only encoder the target of an object at state level ``s`` is the
 embedding of its state phrase ("closed fridge", "open fridge"); the model

@@ -2,7 +2,7 @@
 
 A preset (``config/model/<name>.yaml``) gives any subset of the fields below;
 ``--set section.field=value`` overrides one field from the command line. The
-defaults are the reference settings of METHOD.md; where the paper and the
+defaults are the reference settings of docs/method.md; where the paper and the
 authors' code disagree, the field's docstring says which one the default follows.
 """
 
@@ -84,7 +84,7 @@ class ProbabilityConfig:
 
 @dataclass
 class SamplingConfig:
-    """Proposal sampling with the k-projection at every level (METHOD.md section 4)."""
+    """Proposal sampling with the k-projection at every level (docs/method.md section 4)."""
 
     num_proposal_samples: list[int] = dataclasses.field(default_factory=lambda: [256, 128])
     """Samples per ray at each proposal level (reference 256, 128)."""
@@ -110,7 +110,7 @@ class SamplingConfig:
 
 @dataclass
 class StateConfig:
-    """Given or learned object states (METHOD.md section 6)."""
+    """Given or learned object states (docs/method.md section 6)."""
 
     mode: str = "given"
     """'given' (dense states from the dataset) or 'learned' (key frames supervise a state network)."""
@@ -119,7 +119,7 @@ class StateConfig:
     grid_channels: int = 4
     """Channels of the 1D state grid (= input width of the state MLP)."""
     hidden: int = 32
-    """Hidden width of the state MLP (METHOD.md: 4 -> 32 -> alpha; the reference code's field default is 64)."""
+    """Hidden width of the state MLP (docs/method.md: 4 -> 32 -> alpha; the reference code's field default is 64)."""
     positional_encoding: bool = True
     """Add the small sinusoidal encoding of the frame index to the grid features (reference: on)."""
     grid_init: list[float] = dataclasses.field(default_factory=lambda: [0.0, 1.0])
@@ -130,7 +130,7 @@ class StateConfig:
 
 @dataclass
 class LanguageConfig:
-    """The interaction-aware language table (METHOD.md section 7); active with --language-targets."""
+    """The interaction-aware language table (docs/method.md section 7); active with --language-targets."""
 
     buckets: int = 0
     """State buckets per object in the table; 0 = as many as the targets file has levels."""
@@ -142,7 +142,7 @@ class LanguageConfig:
 
 @dataclass
 class LossWeights:
-    """Loss weights (METHOD.md section 5, the reference values)."""
+    """Loss weights (docs/method.md section 5, the reference values)."""
 
     rgb: float = 1.0
     """Photometric MSE."""

@@ -1,4 +1,4 @@
-"""Per-pixel language targets from a targets .npz (CONTRACTS.md), read with numpy alone.
+"""Per-pixel language targets from a targets .npz (docs/data-contract.md, "Language targets"), read with numpy alone.
 
 A pixel of object ``j`` whose state is ``kappa_j`` takes object ``j``'s
 state-level embeddings interpolated linearly at ``kappa_j``; background pixels

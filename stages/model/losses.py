@@ -1,4 +1,4 @@
-"""Every loss term of METHOD.md section 5, each a small function; weights live in ``LossWeights``.
+"""Every loss term of docs/method.md section 5, each a small function; weights live in ``LossWeights``.
 
 Regularisers on K-Planes follow the K-Planes paper: total variation of the
 planes (for planes with a k axis only along their spatial axis), L1 of the k

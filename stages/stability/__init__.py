@@ -1,4 +1,4 @@
-"""Numerical stability on stiff and extreme cases, bad input, and interrupted runs (issue 10).
+"""Numerical stability on stiff and extreme cases, bad input, and interrupted runs.
 
 ``livescene stability`` and ``tests/stability`` run the same registered cases
 (:data:`CASES`); see docs/stability.md for what each one checks.

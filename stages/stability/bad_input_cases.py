@@ -6,13 +6,16 @@ exit status (2), that the message (``error: <file>: <problem>; fix: <fix>``)
 names the broken file and carries a fix, and that every file under the case
 folder (inputs AND the outputs of an earlier good run in the same ``--out``)
 is byte-identical to before: a refused run changes nothing on disk.
+
+The frames, poses, labels and states CLIs are imported inside the cases that
+call them: importing all of them (COLMAP, open3d, scipy) would cost seconds
+on every ``livescene stability --list``.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
-import importlib
 import io
 import json
 import re
@@ -26,8 +29,11 @@ import cv2
 import numpy as np
 import yaml
 
+from stages.model.train_cli import main as train_main
+from stages.scene.cli import main as scene_main
+
 from .case_context import CaseContext
-from .case_registry import CaseFailed, Outcome, case, require, require_module
+from .case_registry import CaseFailed, Outcome, case, require
 from .tiny_scenes import hand_built_dataset
 
 REPO = Path(__file__).resolve().parents[2]
@@ -40,11 +46,6 @@ def snapshot(root: Path) -> dict[str, str]:
     """sha256 of every file under ``root`` (hidden temp files included), keyed by relative path."""
     return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
             for p in sorted(root.rglob("*")) if p.is_file()}
-
-
-def stage_main(module: str, owner: str) -> Callable[[list[str]], int]:
-    require_module(module, owner)
-    return importlib.import_module(module).main
 
 
 def expect_refusal(main: Callable[[list[str]], int], argv: list[str], folder: Path, *names: str,
@@ -111,7 +112,7 @@ def frames_folder(ctx: CaseContext) -> Path:
     """A FRAMES folder (images/ + frames.csv) of 8 frames 64x48, extracted by `livescene frames` once per run."""
 
     def build() -> Path:
-        main = stage_main("stages.frames.cli", "frames, issue 4")
+        from stages.frames.cli import main
         root = ctx.folder("bad-frames-src")
         video = write_video(root / "pan.mp4", moving_frames())
         with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
@@ -137,7 +138,7 @@ def case_folder(ctx: CaseContext, name: str, with_frames: bool = False) -> Path:
       "frames output in --out is untouched (an mp4 whose first half is overwritten is also tried: what happens "
       "is recorded in the summary, not required)")
 def bad_corrupt_video(ctx: CaseContext) -> Outcome:
-    main = stage_main("stages.frames.cli", "frames, issue 4")
+    from stages.frames.cli import main
     root = case_folder(ctx, "corrupt-video")
     shutil.copytree(frames_folder(ctx), root / "out")  # a good earlier result that must survive
     rng = np.random.default_rng(0)
@@ -165,7 +166,7 @@ def bad_corrupt_video(ctx: CaseContext) -> Outcome:
       "`livescene frames` on an empty (0-byte) file and on a video container with no frames exits 2 naming the "
       "file and a fix, and writes nothing")
 def bad_zero_length_video(ctx: CaseContext) -> Outcome:
-    main = stage_main("stages.frames.cli", "frames, issue 4")
+    from stages.frames.cli import main
     root = case_folder(ctx, "zero-video")
     empty = root / "empty.mp4"
     empty.write_bytes(b"")
@@ -183,7 +184,7 @@ def bad_zero_length_video(ctx: CaseContext) -> Outcome:
 
 
 def _frames_of(ctx: CaseContext, root: Path, images: list[np.ndarray]) -> Path:
-    main = stage_main("stages.frames.cli", "frames, issue 4")
+    from stages.frames.cli import main
     video = write_video(root / "video.mp4", images)
     with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
         rc = main(["--video", str(video), "--out", str(root / "frames"), "--no-progress"])
@@ -195,7 +196,7 @@ def _frames_of(ctx: CaseContext, root: Path, images: list[np.ndarray]) -> Path:
       "`livescene poses` on frames of a camera that never moves exits 2 with a message that says the camera "
       "does not move, names the frames and gives a fix; nothing is written")
 def bad_static_camera_video(ctx: CaseContext) -> Outcome:
-    main = stage_main("stages.poses.cli", "poses, issue 4")
+    from stages.poses.cli import main
     root = case_folder(ctx, "static-camera")
     still = textured(96, 128, seed=3)
     noise = np.random.default_rng(1)
@@ -212,7 +213,7 @@ def bad_static_camera_video(ctx: CaseContext) -> Outcome:
 @case("bad_textureless_sequence", "bad_input",
       "`livescene poses` on frames of a blank wall (no features) exits 2 naming the frames and a fix")
 def bad_textureless_sequence(ctx: CaseContext) -> Outcome:
-    main = stage_main("stages.poses.cli", "poses, issue 4")
+    from stages.poses.cli import main
     root = case_folder(ctx, "textureless")
     images = [np.full((96, 128, 3), 128 + i, dtype=np.uint8) for i in range(8)]
     frames = _frames_of(ctx, root, images)
@@ -233,7 +234,7 @@ def _frame_names(frames: Path) -> list[str]:
       "file and a fix; a scene dataset holding a mask of the wrong size is refused by `livescene scene validate` "
       "and `livescene train` naming that mask")
 def bad_masks_wrong_size(ctx: CaseContext) -> Outcome:
-    main = stage_main("stages.labels.cli", "labels, issue 5")
+    from stages.labels.cli import main
     root = case_folder(ctx, "mask-size", with_frames=True)
     frames = root / "frames"
     h, w = cv2.imread(str(next((frames / "images").glob("*.png")))).shape[:2]
@@ -262,7 +263,7 @@ def bad_masks_wrong_size(ctx: CaseContext) -> Outcome:
       "mask and the mapping, and a fix; a dataset mask with a channel for an object mapping.yaml lacks is "
       "refused by `livescene scene validate` and `livescene train`")
 def bad_mask_label_not_in_mapping(ctx: CaseContext) -> Outcome:
-    main = stage_main("stages.labels.cli", "labels, issue 5")
+    from stages.labels.cli import main
     root = case_folder(ctx, "mask-label", with_frames=True)
     frames = root / "frames"
     h, w = cv2.imread(str(next((frames / "images").glob("*.png")))).shape[:2]
@@ -293,7 +294,7 @@ def bad_mask_label_not_in_mapping(ctx: CaseContext) -> Outcome:
 
 def _states_case(ctx: CaseContext, name: str, key_text: str, suffix: str = ".yaml",
                  *names: str) -> tuple[str, Path]:
-    main = stage_main("stages.states.cli", "states, issue 5")
+    from stages.states.cli import main
     root = case_folder(ctx, name, with_frames=True)
     good = root / "good_key_frames.yaml"
     frames = sorted((root / "frames" / "images").glob("*.png"))
@@ -352,13 +353,8 @@ def _broken_dataset(ctx: CaseContext, name: str, edit: Callable[[dict], None]) -
 
 def _refused_by_validate_and_train(root: Path, tpath: Path, *names: str) -> str:
     """``tpath``: the broken file inside ``root/ds``; both commands must name it."""
-    from stages.scene.cli import main as scene_main
-
     data = root / "ds"
     line = expect_refusal(scene_main, ["validate", str(data)], root, str(tpath), *names)
-    require_module("stages.model.train_cli", "model, issue 6")
-    from stages.model.train_cli import main as train_main
-
     expect_refusal(train_main, ["--data", str(data), "--out", str(root / "run"), "--max-steps", "1",
                                 "--device", "cpu", "--no-progress"], root, str(tpath), *names)
     return line
@@ -400,9 +396,6 @@ def bad_transforms_nonfinite(ctx: CaseContext) -> Outcome:
       "a model preset with a key of the wrong type (train.batch_rays: lots) is refused by `livescene train` "
       "naming the preset file, the key and the expected type; nothing is written")
 def bad_config_wrong_type(ctx: CaseContext) -> Outcome:
-    require_module("stages.model.train_cli", "model, issue 6")
-    from stages.model.train_cli import main as train_main
-
     root = ctx.folder("bad-config-type")
     ds = hand_built_dataset(root / "ds", n_frames=4)
     preset = root / "my-preset.yaml"

@@ -14,9 +14,10 @@ from typing import Any
 
 import torch
 
+from stages.model import Trainer, load_config
 from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
 
-from .case_registry import require, require_module
+from .case_registry import require
 
 TINY_MODEL = [
     *TINY_MODEL_OVERRIDES,
@@ -60,9 +61,6 @@ def nonfinite_grads(model: torch.nn.Module) -> list[str]:
 
 def make_trainer(data: Path, out: Path, *, steps: int, overrides: list[str] | None = None, seed: int = 0,
                  device: str = "cpu") -> Any:
-    require_module("stages.model", "model, issue 6")
-    from stages.model import Trainer, load_config
-
     config = load_config("cpu-demo", [*TINY_MODEL, f"train.max_steps={steps}", *(overrides or [])],
                          data=str(data), seed=seed)
     return Trainer(config, out, device=device, progress=False)

@@ -2,15 +2,14 @@
 
 A case is a plain function ``fn(ctx) -> Outcome`` registered with :func:`case`.
 It checks what it claims with :func:`require` (not ``assert``, which ``python -O``
-strips) and raises :class:`CaseSkipped` when the stage it exercises is not in
-this tree or the hardware it needs is absent. ``livescene stability`` and the
-pytest suite in ``tests/stability`` both call :func:`run_case`, so the table in
-the report and the tests can never disagree about what was checked.
+strips) and raises :class:`CaseSkipped` when the hardware it needs (CUDA) is
+absent. ``livescene stability`` and the pytest suite in ``tests/stability``
+both call :func:`run_case`, so the table in the report and the tests can never
+disagree about what was checked.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import time
 import traceback
 from collections.abc import Callable
@@ -28,23 +27,13 @@ class CaseFailed(Exception):
 
 
 class CaseSkipped(Exception):
-    """The case cannot run in this tree (its stage is missing) or on this machine (no CUDA)."""
+    """The case cannot run on this machine (no CUDA)."""
 
 
 def require(condition: bool, message: str) -> None:
     """Fail the case with ``message`` unless ``condition`` holds."""
     if not condition:
         raise CaseFailed(message)
-
-
-def require_module(module: str, owner: str) -> None:
-    """Skip the case when ``module`` is not importable (its stage has not landed yet)."""
-    try:
-        found = importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
-        found = False
-    if not found:
-        raise CaseSkipped(f"{module} is not in this tree yet ({owner})")
 
 
 @dataclass

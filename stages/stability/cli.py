@@ -2,7 +2,7 @@
 
 Prints the table ``case | result | metric`` and writes a JSON summary (the
 report includes it). Exit status: 0 when no case failed or crashed (skipped
-cases are listed with the reason: a stage not in this tree, no GPU), 1 otherwise.
+cases are listed with the reason, e.g. no GPU), 1 otherwise.
 """
 
 from __future__ import annotations

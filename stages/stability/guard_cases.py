@@ -11,9 +11,11 @@ from pathlib import Path
 
 import torch
 
+from stages.model import TrainingDiverged
+
 from .brief_training import make_trainer
 from .case_context import CaseContext
-from .case_registry import CaseFailed, Outcome, case, require, require_module
+from .case_registry import CaseFailed, Outcome, case, require
 from .tiny_scenes import hand_built_dataset
 
 
@@ -42,7 +44,6 @@ def _params(model: torch.nn.Module) -> dict[str, torch.Tensor]:
       "a NaN loss term skips the step without touching the weights or the optimiser, the log line names the "
       "term and the step, the streak resets after a good step and training goes on to a finite model")
 def nonfinite_loss_skipped(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
     trainer = make_trainer(_dataset(ctx), ctx.folder("guard-loss"), steps=8)
     _poison_loss(trainer, "focal_mask", {3, 4})
     log = io.StringIO()
@@ -78,7 +79,6 @@ def nonfinite_loss_skipped(ctx: CaseContext) -> Outcome:
 @case("nonfinite_gradient_skipped", "guards",
       "a NaN gradient (finite loss) skips the step, the log names the step and the parameter it appeared in")
 def nonfinite_gradient_skipped(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
     trainer = make_trainer(_dataset(ctx), ctx.folder("guard-grad"), steps=4)
     name, param = next((n, p) for n, p in trainer.model.named_parameters() if n.startswith("field.density_mlp"))
     poison = {"on": False}
@@ -105,9 +105,6 @@ def nonfinite_gradient_skipped(ctx: CaseContext) -> Outcome:
       "term; every checkpoint is finite and those written during the streak hold the last good weights; no "
       "model.pt or run.json appears")
 def nonfinite_streak_stops(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
-    from stages.model import TrainingDiverged
-
     out = ctx.folder("guard-streak")
     trainer = make_trainer(_dataset(ctx), out, steps=20, overrides=["train.max_nonfinite=3",
                                                                      "train.checkpoint_every=2"])
@@ -144,9 +141,6 @@ def nonfinite_streak_stops(ctx: CaseContext) -> Outcome:
       "saving a checkpoint of weights holding NaN is refused with TrainingDiverged and leaves the checkpoints "
       "already on disk byte-identical")
 def no_nan_checkpoint(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
-    from stages.model import TrainingDiverged
-
     out = ctx.folder("guard-ckpt")
     trainer = make_trainer(_dataset(ctx), out, steps=4)
     trainer.train_step()

@@ -12,11 +12,14 @@ import time
 from pathlib import Path
 
 import torch
+import yaml
+
+from stages.scene import read_scene
 
 from .brief_training import TINY_MODEL, make_trainer
 from .case_context import CaseContext
-from .case_registry import CaseFailed, Outcome, case, require, require_module
-from .tiny_scenes import hand_built_dataset
+from .case_registry import CaseFailed, Outcome, case, require
+from .tiny_scenes import capture_spec_data, hand_built_dataset
 
 STEPS = 40
 """Long enough that the kill lands midway, short enough for the test budget."""
@@ -97,7 +100,6 @@ def _published_files_complete(out: Path) -> list[str]:
       "--resume and killed hard (SIGKILL, no handler runs) later, it leaves only complete checkpoints; the third "
       "run resumes and ends with weights bit-identical to an uninterrupted run (CPU, same seed, no time budget)")
 def killed_twice_resume_bit_exact(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
     data = hand_built_dataset(ctx.folder("interrupt-ds") / "ds").root
     out = ctx.folder("interrupt-run") / "run"
     rc, err = _kill_midway(data, out, signal.SIGTERM, after_step=5)
@@ -167,14 +169,8 @@ def _job_counts(dry_run_output: str) -> dict[str, int]:
       "leaves the finished outputs intact and no train output; `snakemake -n` then plans only the train job, and "
       "the rerun resumes from the last checkpoint, leaves capture and dataset untouched, and completes")
 def snakemake_interrupt_reruns_incomplete(ctx: CaseContext) -> Outcome:
-    require_module("stages.capture", "capture, issue 3")
-    require_module("stages.model", "model, issue 6")
-    from .tiny_scenes import capture_spec_data
-
     root = ctx.folder("snakemake-interrupt")
     spec = capture_spec_data("tiny", width=32, height=24, n_frames=6)
-    import yaml
-
     (root / "spec.yaml").write_text(yaml.safe_dump(spec))
     overrides = " ".join(f"--set {item}" for item in [*TINY_MODEL, "train.threads=1", "train.checkpoint_every=5"])
     (root / "Snakefile").write_text(SNAKEFILE.format(python=sys.executable, overrides=overrides, steps=STEPS))
@@ -191,8 +187,6 @@ def snakemake_interrupt_reruns_incomplete(ctx: CaseContext) -> Outcome:
     os.killpg(proc.pid, signal.SIGTERM)  # what a scheduler or Ctrl-C sends to the whole job
     out, _ = proc.communicate(timeout=120)
     require(proc.returncode != 0, "snakemake reported success after SIGTERM")
-    from stages.scene import read_scene
-
     ds = read_scene(root / "dataset", validate=True)
     require(not (root / "run" / "run.json").exists(), "the interrupted train rule left run/run.json")
     partial = sorted(str(p.relative_to(root)) for p in root.rglob(".*") if p.is_file()

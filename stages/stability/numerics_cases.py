@@ -19,9 +19,17 @@ import numpy as np
 import torch
 import yaml
 
+from stages.model.config import ModelConfig
+from stages.model.fields import ProbabilityField, RadianceField
+from stages.model.fields.activations import trunc_exp
+from stages.model.rays import RayBundle
+from stages.model.renderers import render_weights
+from stages.model.scene_normalization import aabb_near_far
+from stages.scene import read_scene
+
 from .brief_training import make_trainer, nonfinite_grads, render_held_out, require_learning, train_briefly
 from .case_context import CaseContext
-from .case_registry import CaseSkipped, Outcome, case, require, require_module
+from .case_registry import CaseSkipped, Outcome, case, require
 from .tiny_scenes import band_labels, capture_dataset, hand_built_dataset, object_names
 
 # -- states -------------------------------------------------------------------------------------------------------
@@ -92,8 +100,6 @@ def states_outside_unit_range(ctx: CaseContext) -> Outcome:
       "frame (so two adjacent key frames hold 0 and 1); its truth really contains the jump")
 def step_change_stiff_capture(ctx: CaseContext) -> Outcome:
     data = ctx.cached("capture-stiff", lambda: capture_dataset(ctx.workdir, "stiff", n_frames=8 if ctx.quick else 16))
-    from stages.scene import read_scene
-
     ds = read_scene(data)
     states = ds.state_matrix()
     jump = float(np.abs(np.diff(states, axis=0)).max())
@@ -119,10 +125,6 @@ def step_change_stiff_capture(ctx: CaseContext) -> Outcome:
       "fields sampled exactly on and just outside the faces and corners of the scene box give finite values and "
       "gradients; a capture whose objects stand against the walls (the box faces) trains finitely")
 def objects_touching_box(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
-    from stages.model.config import ModelConfig
-    from stages.model.fields import ProbabilityField, RadianceField
-
     cfg = ModelConfig()
     cfg.field.base_resolution, cfg.field.channels, cfg.field.scales = 8, 4, [1, 2]
     field = RadianceField(cfg.field, 4)
@@ -146,10 +148,8 @@ def objects_touching_box(ctx: CaseContext) -> Outcome:
     require(border > 0, "no gradient reaches the border vertices of the xy plane from samples on the box faces")
     values = {"probe_points": len(coords), "border_grad": border}
     metric = f"{len(coords)} face/corner samples finite, border-vertex gradient {border:.2g}"
-    try:  # a capture whose objects' backs stand on the room walls: the truth scene box is the room
-        data = ctx.cached("capture-demo", lambda: capture_dataset(ctx.workdir, "demo", n_frames=8))
-    except CaseSkipped:
-        return Outcome(metric + " (demo capture not available)", values)
+    # a capture whose objects' backs stand on the room walls: the truth scene box is the room
+    data = ctx.cached("capture-demo", lambda: capture_dataset(ctx.workdir, "demo", n_frames=8))
     spec = yaml.safe_load((ctx.workdir / "capture-demo" / "truth" / "spec.yaml").read_text())
     box = np.asarray(json.loads((ctx.workdir / "capture-demo" / "truth" / "scene.json").read_text())["scene_box"])
     # objects stand on the floor (z = box min) and, yaw 0, their backs reach position y + depth / 2
@@ -170,9 +170,6 @@ def rays_missing_the_box(ctx: CaseContext) -> Outcome:
     root = ctx.folder("rays-miss")
     ds = hand_built_dataset(root / "ds")
     trainer = make_trainer(ds.root, root / "run", steps=ctx.steps)
-    from stages.model.rays import RayBundle
-    from stages.model.scene_normalization import aabb_near_far
-
     origins = torch.tensor([[3.0, 0, 0], [3.0, 0, 0], [0, 0, 5.0], [1.0, 1.0, 3.0], [0.0, 0.0, 0.0],
                             [-3.0, 0.5, 0.5], [3.0, 3.0, 3.0], [0.0, 2.0, 0.0]])
     dirs = torch.tensor([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [0, 0, -1.0], [0.3, -0.2, 0.9],
@@ -208,10 +205,6 @@ def rays_missing_the_box(ctx: CaseContext) -> Outcome:
       "transmittance) and match a float64 reference; the truncated exp has finite values and gradients at "
       "|x| = 1e4; training with the density bias at +30 and -30 stays finite")
 def extreme_densities(ctx: CaseContext) -> Outcome:
-    require_module("stages.model", "model, issue 6")
-    from stages.model.fields.activations import trunc_exp
-    from stages.model.renderers import render_weights
-
     density = torch.tensor([[0.0, 1e-30, 1e-8, 1.0, 1e3, 1e8, 1e30, float("inf")],
                             [float("nan"), 0.0, 1e38, 0.0, 0.0, 0.0, 0.0, 0.0],
                             [1e-30] * 8, [50.0] * 8])

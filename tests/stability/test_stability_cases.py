@@ -1,7 +1,7 @@
 """Every registered stability case, run exactly as `livescene stability --quick` runs it.
 
-A case skipped because its stage is not in the tree (or there is no GPU) is a
-pytest skip with the case's reason; a case that documents a gap another stage
+A case skipped for want of hardware (no GPU) is a pytest skip with the case's
+reason; a case that documents a gap another stage
 still has to close is an xfail naming the request (see KNOWN_GAPS).
 """
 

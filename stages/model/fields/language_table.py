@@ -1,4 +1,4 @@
-"""The interaction-aware language table (METHOD.md section 7).
+"""The interaction-aware language table (docs/method.md section 7).
 
 Instead of a dense 3D language field, one learnable embedding per (object,
 state bucket) plus one for the background. A sample retrieves the entry of its

@@ -1,4 +1,4 @@
-"""The interaction probability field (METHOD.md section 2): which object's state drives each point.
+"""The interaction probability field (docs/method.md section 2): which object's state drives each point.
 
 A tri-plane (xy, xz, yz; planes multiplied; sigmoid) is sampled at the
 normalised position and decoded together with the whole state vector by an

@@ -1,4 +1,4 @@
-"""Learned object states (METHOD.md section 6): a 1D grid over normalised frame index -> kappa per object.
+"""Learned object states (docs/method.md section 6): a 1D grid over normalised frame index -> kappa per object.
 
 257 x 4 grid vertices plus a small sinusoidal encoding of the frame index,
 decoded by an MLP (4 -> 32 -> alpha) with a sigmoid so states stay in [0, 1].

@@ -31,11 +31,8 @@ def build_model(name: str, config: ModelConfig, info: SceneInfo) -> nn.Module:
 
 
 def _load_baselines() -> None:
-    """Import the baselines module if it exists, so its register_method calls run."""
-    import importlib.util
-
-    if importlib.util.find_spec(f"{__name__}.baselines") is not None:
-        importlib.import_module(f"{__name__}.baselines")
+    """Import the baselines module, so its register_method calls run (on use: they import this module)."""
+    from . import baselines  # noqa: F401
 
 
 __all__ = ["METHODS", "LiveSceneModel", "SceneInfo", "build_model", "register_method"]

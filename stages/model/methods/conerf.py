@@ -1,4 +1,4 @@
-"""CoNeRF-style baseline (METHOD.md section 8), re-implemented in torch on the shared harness.
+"""CoNeRF-style baseline (docs/method.md section 8), re-implemented in torch on the shared harness.
 
 Per sample: the attribute-mask head (the shared interaction probability field:
 tri-plane + MLP -> alpha + 1 logits, background last) gives soft mask

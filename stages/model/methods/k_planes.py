@@ -1,4 +1,4 @@
-"""K-Planes with time (METHOD.md section 8): the "no control" reference.
+"""K-Planes with time (docs/method.md section 8): the "no control" reference.
 
 The 4th coordinate is the normalised frame index ``2 t - 1`` instead of an
 object state, so the field reproduces the capture as a video in time but

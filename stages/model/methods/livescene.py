@@ -1,4 +1,4 @@
-"""LiveScene (METHOD.md): proposal sampling with the k-projection at every level, one shared 4D field.
+"""LiveScene (docs/method.md): proposal sampling with the k-projection at every level, one shared 4D field.
 
 Per level: sample positions -> interaction probability field (logits for the
 mask losses) -> argmax object ``u`` -> 4D coordinate (x, y, z, kappa_u) ->

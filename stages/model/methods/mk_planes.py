@@ -1,4 +1,4 @@
-"""MK-Planes and MK-Planes* (METHOD.md section 8): K-Planes over the full (3 + alpha)-D state space.
+"""MK-Planes and MK-Planes* (docs/method.md section 8): K-Planes over the full (3 + alpha)-D state space.
 
 Instead of projecting the alpha interaction variables to one per sample (the
 LiveScene k-projection), every sample's coordinate is
