@@ -31,7 +31,7 @@ def frames_all_kept(frames_dir: Path) -> bool:
 
 
 def registration_advice(cfg: PosesConfig, matcher: str) -> str:
-    """What to try after a registration failure, leaving out what this run already did (issue 17)."""
+    """What to try after a registration failure, leaving out what this run already did."""
     tries = []
     if matcher != "exhaustive":
         tries.append("`--matcher exhaustive` (pairs every frame with every other)")

@@ -1,6 +1,6 @@
 """Does the camera move at all? A check from cheap feature motion, before structure from motion.
 
-COLMAP on a still clip spends minutes (2.6 min on a 267-frame 640x480 clip, issue 17)
+COLMAP on a still clip spends minutes (2.6 min on a 267-frame 640x480 clip; docs/poses.md, "Quality gate")
 before it fails to triangulate. Tracking corners between a couple of dozen sampled
 frames on small grey images takes about a second and tells the same thing:
 a camera that does not move leaves the background where it was.

@@ -3,7 +3,7 @@
 COLMAP can "register" every frame of a clip that no camera path explains: a
 tripod clip after a short pan came back as 267/267 frames at 1.10 px, its first
 65 cameras up to 36 units from the other 202, which sat within 0.01 of each
-other (median point depth 4.75; issue 17). Registration and reprojection error
+other (median point depth 4.75; docs/poses.md). Registration and reprojection error
 cannot see that; the camera path can. All lengths are judged against the median
 distance from the cameras to the 3D points (the scene depth), so the
 numbers read the same whatever scale COLMAP picked (docs/poses.md, "Quality gate"):
