@@ -1,0 +1,54 @@
+"""State combinations given on the command line: ``--states "cabinet=1,drawer=0"`` (docs/export.md).
+
+Each ``--states`` string is one combination; objects it does not name stay closed (0), the default of
+``LoadedRun.state_vector`` without a frame (docs/model.md).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+
+from stages.scene import InputError
+
+_SLUG_UNSAFE = re.compile(r"[^A-Za-z0-9.-]+")
+
+
+def parse_state_string(text: str, objects: Sequence[str], where: str = "--states") -> dict[str, float]:
+    """``"cabinet=1, drawer=0.5"`` -> ``{"cabinet": 1.0, "drawer": 0.5}``; every value in [0, 1].
+
+    An empty string means "every object closed". Errors name the option, the problem and the fix.
+    """
+    out: dict[str, float] = {}
+    for item in (p.strip() for p in text.split(",")):
+        if not item:
+            continue
+        if "=" not in item:
+            raise InputError(where, f"{item!r} in {text!r} is not OBJECT=VALUE",
+                             f'write e.g. --states "{objects[0] if objects else "fridge"}=1"')
+        name, _, value = (s.strip() for s in item.partition("="))
+        if name not in objects:
+            raise InputError(where, f"unknown object {name!r} in {text!r}", f"use one of {list(objects)}")
+        if name in out:
+            raise InputError(where, f"object {name!r} is given twice in {text!r}", "name each object once")
+        try:
+            v = float(value)
+        except ValueError as exc:
+            raise InputError(where, f"{item!r}: {value!r} is not a number", "write a value in [0, 1]") from exc
+        if not math.isfinite(v) or not 0.0 <= v <= 1.0:
+            raise InputError(where, f"{item!r}: state {value} is outside [0, 1]",
+                             "0 is closed, 1 fully open; write a value in between")
+        out[name] = v
+    return out
+
+
+def full_state(states: dict[str, float], objects: Sequence[str]) -> dict[str, float]:
+    """Every object's state, the unnamed ones at 0 (closed)."""
+    return {name: float(states.get(name, 0.0)) for name in objects}
+
+
+def state_slug(states: dict[str, float]) -> str:
+    """A folder name for one combination: ``cabinet-1_drawer-0`` (names made file-system safe)."""
+    parts = [f"{_SLUG_UNSAFE.sub('-', name)}-{value:g}" for name, value in states.items()]
+    return "_".join(parts) or "no-objects"

@@ -1,0 +1,195 @@
+"""``livescene export`` on the tiny capture: geometry in the scene box, a moving part that moves, the files, errors."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from export_truth_run import TruthRun
+
+from stages.capture.geometry import build_scene
+from stages.export import ExportOptions, export_run, read_glb
+from stages.export.cli import main as export_main
+from stages.export.geometry_compare import chamfer_distance, inside_box
+from stages.scene import InputError
+
+
+def _swept_box(spec, index: int) -> np.ndarray:
+    """[[min], [max]] of object ``index``'s boxes over states 0..1 (its truth box), metres = dataset units."""
+    model = build_scene(spec)
+    pts = []
+    for s in np.linspace(0, 1, 11):
+        states = np.zeros(len(model.joints))
+        states[index] = s
+        verts, _ = model.mesh(model.part_poses(states))
+        pts.append(verts[np.repeat(model.part_object == index + 1, 8)])
+    p = np.concatenate(pts)
+    return np.stack([p.min(0), p.max(0)])
+
+
+@pytest.fixture(scope="module")
+def drawer_export(tiny_capture_dataset, tmp_path_factory):
+    """The tiny capture's truth exported (GLB, with object parts) with the drawer closed and open."""
+    _, ds, renderer = tiny_capture_dataset
+    out = tmp_path_factory.mktemp("drawer") / "export"
+    doc = export_run(TruthRun(renderer), ds, [{"drawer": 0.0}, {"drawer": 1.0}], out,
+                     ExportOptions(fmt="glb", objects=True, scale=1.0, resolution=128), progress=False)
+    return ds, renderer, out, doc
+
+
+def test_the_mesh_lies_in_the_scene_box_and_the_drawer_part_moves_with_its_state(drawer_export):
+    ds, renderer, out, doc = drawer_export
+    closed, opened = (out / r["folder"] for r in doc["exports"])
+    box = np.asarray(ds.scene_box)
+    for folder in (closed, opened):
+        scene = read_glb(folder / "scene_mesh.glb")["positions"]
+        assert len(scene) > 1000
+        assert np.all(scene >= box[0] - 1e-5) and np.all(scene <= box[1] + 1e-5)
+
+    # the drawer's part, closed and open: apart by the drawer's travel, together once moved by it
+    model = build_scene(renderer.spec)
+    j = renderer.objects.index("drawer")
+    motion = model.object_frames[j] @ model.joints[j].transform(1.0) @ np.linalg.inv(model.object_frames[j])
+    shift = motion[:3, 3]
+    assert np.linalg.norm(shift) == pytest.approx(0.3)
+    part0 = read_glb(closed / "objects" / "drawer_mesh.glb")["positions"]
+    part1 = read_glb(opened / "objects" / "drawer_mesh.glb")["positions"]
+    assert len(part0) > 50 and len(part1) > 50
+    apart, moved = chamfer_distance(part0, part1), chamfer_distance(part0 + shift, part1)
+    assert apart > 0.2 and moved < 0.03, (apart, moved)
+    # the part is the drawer: inside its swept box
+    swept = _swept_box(renderer.spec, j)
+    assert inside_box(part1, swept, margin=0.05).mean() > 0.95
+
+    # the cabinet did not move: its part is the same at both drawer states
+    cab0 = read_glb(closed / "objects" / "cabinet_mesh.glb")["positions"]
+    cab1 = read_glb(opened / "objects" / "cabinet_mesh.glb")["positions"]
+    assert chamfer_distance(cab0, cab1) < 0.01
+
+    # outside the drawer's swept box the room is unchanged (<= 1 % of the scene extent)
+    a = read_glb(closed / "scene_mesh.glb")["positions"]
+    b = read_glb(opened / "scene_mesh.glb")["positions"]
+    static = chamfer_distance(a[~inside_box(a, swept, margin=0.05)], b[~inside_box(b, swept, margin=0.05)])
+    assert static <= 0.01 * float(np.max(box[1] - box[0]))
+
+
+def test_export_json_records_sizes_counts_timings_and_thumbnails(drawer_export):
+    ds, _, out, doc = drawer_export
+    assert json.loads((out / "export.json").read_text()) == json.loads(json.dumps(doc))
+    assert doc["objects"] == ["cabinet", "drawer"] and doc["views"] == len(ds.frames_in("train"))
+    assert [r["states"] for r in doc["exports"]] == [{"cabinet": 0.0, "drawer": 0.0}, {"cabinet": 0.0, "drawer": 1.0}]
+    for record in doc["exports"]:
+        for key, entry in record["files"].items():
+            path = out / entry["path"]
+            assert path.stat().st_size == entry["bytes"]
+            geom = read_glb(path)
+            if key.endswith("_mesh"):
+                assert len(geom["positions"]) == entry["vertices"] and len(geom["triangles"]) == entry["triangles"]
+                assert geom["mode"] == 4 and geom["triangles"].max() < entry["vertices"]
+            else:
+                assert len(geom["positions"]) == entry["points"] and geom["mode"] == 0
+        timings = record["timings_s"]
+        assert timings["total"] >= timings["render"] + timings["fuse"] > 0
+        thumb = cv2.imread(str(out / record["thumbnail"]))
+        assert thumb.shape[1] == 320 and thumb.std() > 10  # a picture, not a blank
+    assert not list(out.parent.glob(".export*")), "no temporary folder left behind"
+
+
+def test_objects_need_a_probability_field(tiny_capture_dataset, tmp_path):
+    _, ds, renderer = tiny_capture_dataset
+    with pytest.raises(InputError, match=r"--objects needs per-object probabilities.*fix: .*leave out --objects"):
+        export_run(TruthRun(renderer, with_probs=False), ds, [{}], tmp_path / "x", ExportOptions(objects=True),
+                   progress=False)
+    assert not (tmp_path / "x").exists()
+
+
+def test_cli_exports_a_real_run_in_each_format(tiny_trained_run, tiny_capture_dataset, tmp_path, capsys):
+    ds = tiny_capture_dataset[1]
+    out = tmp_path / "obj"
+    code = export_main(["--run", str(tiny_trained_run), "--states", "cabinet=1, drawer=0", "--states", "drawer=0.5",
+                        "--format", "obj", "--objects", "--views", "2", "--scale", "0.5", "--out", str(out),
+                        "--no-progress"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    doc = json.loads((out / "export.json").read_text())
+    assert [e["states"] for e in summary["exports"]] == [{"cabinet": 1.0, "drawer": 0.0},
+                                                         {"cabinet": 0.0, "drawer": 0.5}]
+    assert doc["views"] == 2 and doc["render_size"] == [32, 24] and doc["method"] == "livescene"
+    box = np.asarray(ds.scene_box)
+    for record in doc["exports"]:
+        assert {"scene_mesh", "scene_points", "objects/cabinet_mesh", "objects/drawer_points"} <= set(record["files"])
+        text = (out / record["files"]["scene_mesh"]["path"]).read_text()
+        verts = np.array([[float(x) for x in line.split()[1:4]] for line in text.splitlines()
+                          if line.startswith("v ")]).reshape(-1, 3)
+        assert len(verts) == record["files"]["scene_mesh"]["vertices"]
+        assert np.all(verts >= box[0] - 1e-4) and np.all(verts <= box[1] + 1e-4)
+        assert (out / record["thumbnail"]).is_file()
+    for fmt in ("ply", "glb"):
+        assert export_main(["--run", str(tiny_trained_run), "--format", fmt, "--views", "1", "--scale", "0.25",
+                            "--out", str(tmp_path / fmt), "--no-progress"]) == 0
+        assert (tmp_path / fmt / "cabinet-0_drawer-0" / f"scene_mesh.{fmt}").is_file()
+
+
+@pytest.mark.parametrize(("states", "message"), [
+    ("fridge=1", r"unknown object 'fridge'.*fix: use one of \['cabinet', 'drawer'\]"),
+    ("cabinet", r"'cabinet' in 'cabinet' is not OBJECT=VALUE"),
+    ("cabinet=open", r"'open' is not a number"),
+    ("cabinet=1.5", r"state 1.5 is outside \[0, 1\]"),
+    ("cabinet=1,cabinet=0", r"object 'cabinet' is given twice"),
+])
+def test_cli_explains_bad_state_strings(tiny_trained_run, tmp_path, capsys, states, message):
+    out = tmp_path / "bad"
+    assert export_main(["--run", str(tiny_trained_run), "--states", states, "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --states: ")
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_cli_explains_a_missing_run(tmp_path, capsys):
+    assert export_main(["--run", str(tmp_path / "none"), "--out", str(tmp_path / "o")]) == 2
+    assert "no trained model in this run folder" in capsys.readouterr().err
+
+
+def test_writers_handle_empty_geometry(tmp_path):
+    import open3d as o3d
+
+    from stages.export import write_geometry
+
+    for fmt in ("ply", "obj", "glb"):
+        write_geometry(tmp_path / f"empty.{fmt}", o3d.geometry.TriangleMesh())
+    assert len(read_glb(tmp_path / "empty.glb")["positions"]) == 0
+    assert len(o3d.io.read_triangle_mesh(str(tmp_path / "empty.ply")).vertices) == 0
+
+
+def test_mesh_formats_round_trip(tmp_path):
+    import open3d as o3d
+
+    from stages.export import write_geometry
+
+    mesh = o3d.geometry.TriangleMesh.create_box(1.0, 2.0, 3.0)
+    mesh.compute_vertex_normals()
+    mesh.vertex_colors = o3d.utility.Vector3dVector(np.linspace(0, 1, 24).reshape(8, 3))
+    verts, tris = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    for fmt in ("ply", "obj"):
+        write_geometry(tmp_path / f"box.{fmt}", mesh)
+        back = o3d.io.read_triangle_mesh(str(tmp_path / f"box.{fmt}"))
+        assert np.allclose(np.sort(np.asarray(back.vertices), axis=0), np.sort(verts, axis=0), atol=1e-5)
+        assert len(back.triangles) == 12
+    ply = o3d.io.read_triangle_mesh(str(tmp_path / "box.ply"))
+    assert np.allclose(np.asarray(ply.vertex_colors), np.asarray(mesh.vertex_colors), atol=1 / 255)
+    write_geometry(tmp_path / "box.glb", mesh)
+    glb = read_glb(tmp_path / "box.glb")
+    assert np.allclose(glb["positions"], verts) and np.array_equal(glb["triangles"], tris)
+    assert np.allclose(glb["colors"], np.asarray(mesh.vertex_colors), atol=1 / 255)
+    trimesh = pytest.importorskip("trimesh")  # an independent glTF reader, where installed
+    loaded = trimesh.load(tmp_path / "box.glb", force="mesh")
+    assert np.allclose(np.sort(loaded.vertices, axis=0), np.sort(verts, axis=0))
+    points = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(verts))
+    write_geometry(tmp_path / "points.glb", points)
+    assert read_glb(tmp_path / "points.glb")["mode"] == 0
+    assert Path(tmp_path / "points.glb").stat().st_size > 96
