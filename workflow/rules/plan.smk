@@ -1,0 +1,199 @@
+# What each scene carries, and the plan: which rules it needs and why the others are left out (the
+# report shows the plan; the input functions in common.smk and the targets follow it).
+
+
+# --- what a scene carries ---------------------------------------------------------------
+
+
+def row(scene):
+    return scenes.loc[scene]
+
+
+def source(scene):
+    return row(scene)["source"]
+
+
+def carries(scene, column):
+    """True when the scene has this item (the source carries it, or a path is given)."""
+    return row(scene)[column] != "no"
+
+
+def estimates_poses(scene):
+    return row(scene)["poses"] == "estimate"
+
+
+def imported_model(scene):
+    """The COLMAP model folder of a 'colmap:<folder>' poses cell, else None."""
+    value = row(scene)["poses"]
+    return value.split(":", 1)[1] if value.startswith("colmap:") else None
+
+
+def from_frames(scene):
+    """True when the dataset is assembled here from extracted frames (poses estimated or imported)."""
+    return source(scene) != "dataset" and row(scene)["poses"] != "given"
+
+
+def has_truth(scene):
+    return carries(scene, "truth")
+
+
+def has_names(scene):
+    return carries(scene, "names")
+
+
+def methods(scene):
+    listed = row(scene)["methods"]
+    return listed.split(",") if listed else list(config["methods"])
+
+
+def R(scene, *parts):
+    """A path under results/<scene>/."""
+    return str(Path(RESULTS, scene, *parts))
+
+
+def capture_dir(scene):
+    return R(scene, "capture")
+
+
+def truth_dir(scene):
+    """Folder holding truth/ (a synthetic capture, or the row's truth path)."""
+    value = row(scene)["truth"]
+    return capture_dir(scene) if value == "yes" else value
+
+
+def dataset_dir(scene):
+    """The scene dataset every model rule reads."""
+    kind = source(scene)
+    if kind == "dataset":
+        return row(scene)["path"]
+    if kind == "synthetic" and not from_frames(scene):
+        return R(scene, "truth_dataset")
+    return R(scene, "dataset")
+
+
+def dataset_files(scene):
+    """The dataset plus, for a ready dataset, the marker of its validation."""
+    files = {"data": dataset_dir(scene)}
+    if source(scene) == "dataset":
+        files["valid"] = R(scene, "dataset_valid.json")
+    return files
+
+
+def dataset_input(wildcards):
+    return dataset_files(wildcards.scene)
+
+
+def prompts_file(scene):
+    """prompts.yaml of the scene's names (synonyms, descriptions), or None."""
+    value = row(scene)["prompts"]
+    if value == "no":
+        return None
+    if value in ("", "yes"):
+        return str(Path(capture_dir(scene), "prompts.yaml")) if source(scene) == "synthetic" else None
+    return value
+
+
+# --- the plan: which rules a scene needs, and why the others are left out ----------------------
+
+
+def plan(scene):
+    """Rule name -> (needed, reason). The report shows it; all_targets follows it."""
+    kind, est, model = source(scene), estimates_poses(scene), imported_model(scene)
+    framed = from_frames(scene)
+    given = "poses come with the data"
+    p = {}
+    p["capture"] = (kind == "synthetic", "synthetic spec" if kind == "synthetic" else f"source is {kind}")
+    p["capture_dataset"] = (kind == "synthetic" and not framed,
+                            "poses given: dataset written from the capture truth" if kind == "synthetic" and not framed
+                            else "poses are estimated" if kind == "synthetic" else f"source is {kind}")
+    p["frames"] = (framed, "frames from the video or image folder" if framed else given)
+    p["poses"] = (framed and est, "COLMAP poses" if framed and est else
+                  "COLMAP model given: imported instead" if model else given)
+    p["poses_import"] = (model is not None, f"COLMAP model imported from {model} (no SfM)" if model
+                         else "no COLMAP model given")
+    p["pose_compare"] = (framed and has_truth(scene),
+                         "estimated poses vs truth" if framed and has_truth(scene)
+                         else "no truth" if not has_truth(scene) else "poses were not estimated")
+    labels = framed and carries(scene, "masks")
+    p["labels"] = (labels, "masks given" if labels else given if not framed else "scene has no masks")
+    states = framed and carries(scene, "key_frames")
+    p["states"] = (states, "key frames given" if states else given if not framed else "scene has no key frames")
+    p["assemble"] = (framed, "joins frames, poses, labels, states" if framed
+                     else "dataset comes ready" if kind == "dataset" else "dataset written from the capture truth")
+    p["scene_validate"] = (kind == "dataset", "ready dataset checked against the contract" if kind == "dataset"
+                           else "dataset written by this workflow (validated when written)")
+    p["language_targets"] = (has_names(scene), "object names given" if has_names(scene) else "scene has no names")
+    for m in METHODS:
+        chosen = m in methods(scene)
+        p[f"train[{m}]"] = (chosen, "listed for this scene" if chosen else "method not listed for this scene")
+        p[f"evaluate[{m}]"] = (chosen, ("with truth (unseen combinations)" if has_truth(scene) else
+                                        "held-out views only: no truth") if chosen else "method not trained")
+    for m in methods(scene):
+        sweep = m in config["report"]["sweep_methods"]
+        p[f"sweep[{m}]"] = (sweep, "state sweeps for the sliders" if sweep else "not in report.sweep_methods")
+        control = sweep and has_names(scene)
+        p[f"control[{m}]"] = (control, "language commands" if control
+                              else "scene has no names" if not has_names(scene) else "not in report.sweep_methods")
+    p["stability"] = (config["stability"]["run"], "stability suite (once for all scenes)"
+                      if config["stability"]["run"] else "stability.run is false")
+    return p
+
+
+def needed(scene, rule_name):
+    return plan(scene)[rule_name][0]
+
+
+def scene_outputs(scene):
+    """Everything the scene's report page reads, following the plan."""
+    out = {}
+    if needed(scene, "capture"):
+        out["capture"] = capture_dir(scene)
+    if needed(scene, "poses") or needed(scene, "poses_import"):
+        out["poses"] = R(scene, "poses")
+    if needed(scene, "pose_compare"):
+        out["pose_error"] = R(scene, "pose_error.json")
+    if needed(scene, "labels"):
+        out["labels"] = R(scene, "labels")
+    if needed(scene, "states"):
+        out["states"] = R(scene, "states")
+    out.update({f"dataset_{k}": v for k, v in dataset_files(scene).items()})
+    if needed(scene, "language_targets"):
+        out["targets"] = R(scene, "language", "targets.npz")
+    for m in methods(scene):
+        out[f"run_{m}"] = R(scene, "runs", m, "run.json")
+        out[f"eval_{m}"] = R(scene, "eval", m)
+        if needed(scene, f"sweep[{m}]"):
+            out[f"sweep_{m}"] = R(scene, "sweep", m)
+        if needed(scene, f"control[{m}]"):
+            out[f"control_{m}"] = R(scene, "control", m)
+    if config["stability"]["run"]:
+        out["stability"] = str(Path(RESULTS, "stability", "summary.json"))
+    return out
+
+
+def all_targets():
+    """Final outputs: the index page (which pulls in every scene page and all it needs)."""
+    return [str(Path(REPORTS, "index.html"))]
+
+
+def earlier_summaries(scene=None):
+    """summary.json of the sheet's unselected scenes whose pages an earlier run wrote (or just that scene's)."""
+    names = [scene] if scene else [s for s in scenes.index if s not in SELECTED]
+    return [R(s, "report", "summary.json") for s in names
+            if Path(R(s, "report", "summary.json")).is_file() and Path(REPORTS, "scenes", f"{s}.html").is_file()]
+
+
+def pending_arg():
+    """--pending of the index: the sheet's scenes with no page (not built now, nor by an earlier run)."""
+    names = [s for s in scenes.index if s not in SELECTED and not earlier_summaries(s)]
+    return f"--pending {shlex.quote(','.join(names))}" if names else ""
+
+
+def log_path(name):
+    return str(Path(RESULTS, "{scene}", "logs", f"{name}.log"))
+
+
+def bench_path(name):
+    return str(Path(RESULTS, "{scene}", "benchmarks", f"{name}.tsv"))
+
+

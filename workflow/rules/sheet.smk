@@ -1,0 +1,145 @@
+# The workflow config and the scene sheet: loaded and validated at workflow start (errors name the
+# file, the line and the column), and the scenes this run builds (config key 'only').
+import json
+import shlex
+from pathlib import Path
+
+import jsonschema
+import pandas as pd
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+SCHEMAS = Path(workflow.current_basedir.get_path_or_uri(secret_free=True)).parent / "schemas"
+# The method names, once for the workflow (tests/workflow/test_method_names.py holds them equal to the
+# model stage's registry and to the scene sheet's pattern).
+METHODS = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())["properties"]["methods"]["items"]["enum"]
+
+
+def _schema_problem(error):
+    """One line naming the key path, the bad value and what the schema expects."""
+    where = ".".join(str(p) for p in error.absolute_path) or "(top level)"
+    expected = {k: error.schema[k] for k in ("type", "enum", "pattern", "minimum", "exclusiveMinimum")
+                if k in error.schema}
+    return f"key {where!r}: {error.message}" + (f" (expected {expected})" if expected else "")
+
+
+def _check_config(cfg):
+    """Validate the merged config; the error names the config file(s), the key and the expected type."""
+    schema = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())
+    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(cfg), key=lambda e: list(e.absolute_path))
+    if errors:
+        files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
+        lines = "\n".join(f"  - {_schema_problem(e)}" for e in errors)
+        raise WorkflowError(f"invalid workflow config in {', '.join(files)}:\n{lines}\n"
+                            f"fix: correct these keys (schema: {SCHEMAS / 'config.schema.yaml'})")
+    validate(cfg, schema="../schemas/config.schema.yaml")  # fills the defaults
+
+
+ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
+
+
+def _row_problems(record):
+    """What the schema cannot say about one row: which values suit its source, and that paths exist."""
+    kind, poses = record["source"], record.get("poses", "estimate")
+    problems = []
+    if not Path(record["path"]).exists():
+        problems.append(f"column 'path': {record['path']!r} does not exist; fix: give the capture spec, video, "
+                        "image folder or dataset folder")
+    if kind == "dataset" and poses != "given":
+        problems.append("column 'poses': a ready dataset carries its poses; write 'given'")
+    if kind in ("video", "images") and poses == "given":
+        problems.append(f"column 'poses': a {kind} source has no poses to give; write 'estimate', or "
+                        "'colmap:<folder>' to import a COLMAP model")
+    if poses.startswith("colmap:"):
+        folder = poses.split(":", 1)[1]
+        if kind != "images":
+            problems.append(f"column 'poses': a COLMAP model is matched to an image folder by image name; the source "
+                            f"is {kind}; fix: use source 'images' with the folder the model was made from, or "
+                            "'estimate'")
+        elif not Path(folder).is_dir():
+            problems.append(f"column 'poses': COLMAP model folder {folder!r} does not exist; fix: give the folder "
+                            "holding cameras/images/points3D (.bin or .txt), or one holding sparse/0")
+    for column in ITEM_COLUMNS:
+        value = record.get(column, "")
+        if value == "yes" and kind in ("video", "images"):
+            problems.append(f"column {column!r}: 'yes' means the source itself holds it (a synthetic capture or "
+                            f"a ready dataset); for a {kind} source write 'no' or the path of the file or folder")
+        elif value not in ("", "yes", "no") and not Path(value).exists():
+            problems.append(f"column {column!r}: {value!r} does not exist; fix: give an existing file or folder, "
+                            "or write 'no'")
+    truth = record.get("truth", "no")
+    if truth == "yes" and kind != "synthetic":
+        problems.append(f"column 'truth': 'yes' means a synthetic capture's own truth; for a {kind} source write "
+                        "'no' or the capture folder holding truth/transforms.json")
+    elif truth not in ("yes", "no") and not Path(truth, "truth", "transforms.json").is_file():
+        problems.append(f"column 'truth': {truth!r} is not 'yes', 'no' or a capture folder holding "
+                        "truth/transforms.json; fix: write 'no' for a capture without truth, or the capture folder")
+    return problems
+
+
+def _read_scene_sheet(path):
+    """Read and validate the scene sheet; errors name the file, the line, the scene and the column."""
+    sheet_path = Path(path)
+    if not sheet_path.is_file():
+        raise WorkflowError(f"{sheet_path}: the scene sheet does not exist; fix: write it (see docs/workflow.md) "
+                            "or point config key 'scenes' at it")
+    sheet = pd.read_csv(sheet_path, sep="\t", dtype=str, comment="#", keep_default_na=False)
+    schema = yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())
+    problems = []
+    unknown = [c for c in sheet.columns if c not in schema["properties"]]
+    if unknown:
+        problems.append(f"header: unknown column(s) {unknown}; known: {list(schema['properties'])}")
+    for i, row in enumerate(sheet.to_dict("records")):
+        record = {k: v for k, v in row.items() if v != "" and k in schema["properties"]}
+        name = row.get("scene") or f"row {i + 1}"
+        errors = list(jsonschema.Draft202012Validator(schema).iter_errors(record))
+        for error in errors:
+            problems.append(f"line {i + 2} (scene {name!r}): {_schema_problem(error)}")
+        if not errors:
+            problems += [f"line {i + 2} (scene {name!r}): {p}" for p in _row_problems(record)]
+    dupes = sheet["scene"][sheet["scene"].duplicated()].tolist() if "scene" in sheet else []
+    if dupes:
+        problems.append(f"column 'scene': duplicate scene name(s) {dupes}")
+    if sheet.empty:
+        problems.append("no scene rows")
+    if problems:
+        lines = "\n".join(f"  - {p}" for p in problems)
+        raise WorkflowError(f"invalid scene sheet {sheet_path}:\n{lines}\nfix: correct these cells "
+                            f"(schema: {SCHEMAS / 'scenes.schema.yaml'})")
+    for column, prop in schema["properties"].items():
+        default = prop.get("default", "")
+        if column not in sheet:
+            sheet[column] = default
+        sheet[column] = sheet[column].replace("", default)
+    return sheet.set_index("scene", drop=False)
+
+
+def _selected_scenes(sheet):
+    """Scenes this run builds: config key 'only' (comma-separated, e.g. --config only=kitchen), else all."""
+    wanted = [s for s in str(config.get("only") or "").split(",") if s]
+    unknown = [s for s in wanted if s not in sheet.index]
+    if unknown:
+        raise WorkflowError(f"config key 'only': scene(s) {unknown} are not in the scene sheet {config['scenes']} "
+                            f"(its scenes: {list(sheet.index)}); fix: name scenes of the sheet")
+    return wanted or list(sheet.index)
+
+
+_check_config(config)
+scenes = _read_scene_sheet(config["scenes"])
+SELECTED = _selected_scenes(scenes)
+RESULTS = config["results"]
+REPORTS = config["reports"]
+
+
+wildcard_constraints:
+    scene="|".join(scenes.index),
+    method="|".join(METHODS),
+
+
+def scene_pattern(keep):
+    """Wildcard constraint matching the sheet's scenes for which keep(scene) holds (never matches if none)."""
+    names = [s for s in scenes.index if keep(s)]
+    return "|".join(names) if names else "(?!)"
+
+
