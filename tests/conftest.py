@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import os
+
+# Before anything loads torch: OpenMP threads sleep at barriers instead of spinning (docs/model.md), as in
+# every `livescene` command; pytest shares its 2 cores with the subprocesses the tests start.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 import shutil
 from pathlib import Path
 
