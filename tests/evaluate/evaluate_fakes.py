@@ -6,13 +6,11 @@ the fridge's pixels only, so every PSNR below is computable by hand.
 
 from __future__ import annotations
 
-import zlib
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from stages.language import CachedEncoder
 from stages.scene import Camera, Frame, SceneDataset, label_map_to_onehot, write_mask, write_scene
 
 W, H = 16, 12
@@ -72,25 +70,6 @@ class FakeRun:
         probs = label_map_to_onehot(np.array([[0, -1, 1][i] for i in ids_map().ravel()]).reshape(H, W), 2)
         return {"rgb": base + _checker(), "depth": np.ones((H, W)), "accumulation": np.ones((H, W)),
                 "probs": probs.astype(np.float32)}
-
-
-class BagOfWordsEncoder(CachedEncoder):
-    """A deterministic stand-in for a text model: the sum of one random vector per word."""
-
-    name = "bag-of-words-test"
-
-    @property
-    def dim(self) -> int:
-        return 64
-
-    def _encode_new(self, texts):
-        rows = []
-        for t in texts:
-            v = np.zeros(64)
-            for w in t.lower().split():
-                v += np.random.default_rng(zlib.crc32(w.encode())).standard_normal(64)
-            rows.append(v)
-        return np.array(rows)
 
 
 def make_eval_dataset(root: Path, n_frames: int = 8) -> SceneDataset:

@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 import pytest
-from evaluate_fakes import ERROR, BagOfWordsEncoder
+from evaluate_fakes import ERROR
+from tiny_language_run import BagOfWordsEncoder
 
 from stages.evaluate import EvaluateConfig, TruthSource, evaluate_run, read_sim3
 from stages.evaluate import cli as evaluate_cli

@@ -13,14 +13,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-import torch
-from evaluate_fakes import BagOfWordsEncoder
+from tiny_language_run import BagOfWordsEncoder, train_tiny_language_run
 
-from stages.capture import capture_to_dataset, generate_capture, load_spec
 from stages.evaluate import cli as evaluate_cli
 from stages.evaluate.metrics import psnr
-from stages.language import ObjectVocabulary, build_targets
-from stages.model import Trainer, load_config
 from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
 from stages.scene import read_scene
 
@@ -35,19 +31,7 @@ TINY_MODEL = [
 @pytest.fixture(scope="module")
 def real_run(tmp_path_factory):
     """(capture, dataset, run) of a 64x48, 8-frame capture of the tiny preset, trained 4 steps with language."""
-    torch.set_num_threads(1)
-    work = tmp_path_factory.mktemp("real_run")
-    spec = load_spec(ROOT / "config" / "captures" / "tiny.yaml")
-    spec.video.n_frames = 8
-    spec.video.width, spec.video.height = 64, 48
-    spec.render.texture_size = 64
-    spec.render.supersample = 1
-    capture = generate_capture(spec, work / "capture", progress=False)
-    ds = capture_to_dataset(capture, work / "dataset", split="alternate", progress=False)
-    targets = build_targets(ObjectVocabulary.from_dataset(ds.root), BagOfWordsEncoder()).write(work / "targets.npz")
-    config = load_config("cpu-demo", TINY_MODEL, data=str(ds.root), seed=0, language_targets=str(targets))
-    Trainer(config, work / "run", device="cpu", progress=False).train()
-    return capture, ds.root, work / "run"
+    return train_tiny_language_run(tmp_path_factory.mktemp("real_run"), TINY_MODEL)
 
 
 def test_evaluate_a_real_run_against_the_truth_renderer(real_run, tmp_path, monkeypatch, capsys):

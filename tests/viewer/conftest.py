@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from viewer_fakes import BagOfWordsEncoder, make_viewer_run
+from tiny_language_run import BagOfWordsEncoder
+from viewer_fakes import make_viewer_run
 
 from stages.language.vocabulary import ObjectVocabulary
 from stages.model import load_run

@@ -1,20 +1,15 @@
-"""Test doubles of the viewer tests: a deterministic text encoder and a tiny run whose states show in the image."""
+"""Test doubles of the viewer tests: a tiny run whose object states show in the image."""
 
 from __future__ import annotations
 
-import zlib
 from pathlib import Path
 
-import numpy as np
 import torch
+from tiny_language_run import train_tiny_language_run
 
-from stages.capture import capture_to_dataset, generate_capture, load_spec
-from stages.language import ObjectVocabulary, build_targets
-from stages.language.encoder import CachedEncoder
-from stages.model import Trainer, load_config, load_run
+from stages.model import load_run
 from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
 
-ROOT = Path(__file__).resolve().parents[2]
 TINY_RUN = [
     *TINY_MODEL_OVERRIDES,
     "train.batch_rays=64", "train.warmup_steps=2", "train.eval_every=100", "train.eval_rays=64",
@@ -22,25 +17,6 @@ TINY_RUN = [
     # every sample follows the state of its most probable object (the preset rejects weak ones: after 4 steps all)
     "model.probability.rejection_threshold=0",
 ]
-
-
-class BagOfWordsEncoder(CachedEncoder):
-    """A stand-in for a text model: the sum of one fixed random vector per word (no model to load)."""
-
-    name = "bag-of-words-test"
-
-    @property
-    def dim(self) -> int:
-        return 64
-
-    def _encode_new(self, texts: list[str]) -> np.ndarray:
-        rows = []
-        for text in texts:
-            v = np.zeros(64)
-            for word in text.lower().split():
-                v += np.random.default_rng(zlib.crc32(word.encode())).standard_normal(64)
-            rows.append(v)
-        return np.array(rows)
 
 
 def make_states_visible(run_dir: Path, seed: int = 0) -> None:
@@ -66,18 +42,8 @@ def make_states_visible(run_dir: Path, seed: int = 0) -> None:
 
 
 def make_viewer_run(work: Path) -> tuple[Path, Path]:
-    """(dataset, run): the tiny capture (cabinet, drawer) at 64x48, 8 frames, LiveScene trained 30 steps with a
-    language table whose targets come from the bag-of-words encoder."""
-    torch.set_num_threads(1)
-    spec = load_spec(ROOT / "config" / "captures" / "tiny.yaml")
-    spec.video.n_frames = 8
-    spec.video.width, spec.video.height = 64, 48
-    spec.render.texture_size = 64
-    spec.render.supersample = 1
-    capture = generate_capture(spec, work / "capture", progress=False)
-    ds = capture_to_dataset(capture, work / "dataset", split="alternate", progress=False)
-    targets = build_targets(ObjectVocabulary.from_dataset(ds.root), BagOfWordsEncoder()).write(work / "targets.npz")
-    config = load_config("cpu-demo", TINY_RUN, data=str(ds.root), seed=0, language_targets=str(targets))
-    Trainer(config, work / "run", device="cpu", progress=False).train()
-    make_states_visible(work / "run")
-    return ds.root, work / "run"
+    """(dataset, run): the shared tiny language run (tests/tiny_language_run.py), 30 steps, its state planes
+    made visible."""
+    _, dataset, run = train_tiny_language_run(work, TINY_RUN)
+    make_states_visible(run)
+    return dataset, run
