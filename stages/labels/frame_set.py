@@ -27,10 +27,17 @@ class FrameSet:
     """Image width in pixels."""
     root: Path
     """The folder the images were listed from."""
+    image_names: tuple[str, ...] = ()
+    """Image file names in frame order (aligned with ``frame_ids``)."""
 
     def __post_init__(self) -> None:
         self._ids = set(self.frame_ids)
         self._by_number = {int(f): f for f in self.frame_ids if f.isdigit()}
+
+    @property
+    def images(self) -> list[Path]:
+        """Image paths in frame order."""
+        return [self.root / n for n in self.image_names]
 
     def match(self, label_id: str) -> str | None:
         """The frame a label's id refers to: same id, or same number when zero padding differs."""
@@ -62,4 +69,5 @@ def read_frame_set(frames_dir: str | Path) -> FrameSet:
     if img is None:
         raise LabelError(first, "image missing or unreadable", "re-extract the frames")
     ids = tuple(frame_id_of(Path(n).stem) for n in names)
-    return FrameSet(frame_ids=ids, height=int(img.shape[0]), width=int(img.shape[1]), root=image_dir)
+    return FrameSet(frame_ids=ids, height=int(img.shape[0]), width=int(img.shape[1]), root=image_dir,
+                    image_names=tuple(names))

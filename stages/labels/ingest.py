@@ -7,6 +7,11 @@ Output (written atomically into ``out``)::
     labels.json       coverage per object per frame, frames without masks,
                       unreliable frames (an object present on fewer than
                       H*W/300 pixels: its mask is too small to trust)
+
+When the annotations cover only some frames, the others are filled by optical-flow
+propagation (``missing_masks="propagate"``, the default; stages/labels/propagate_masks.py adds
+confidence/, confidence.csv and propagation.json), left without masks ("leave") or refused
+("refuse"). With every frame annotated the output is the same in every mode.
 """
 
 from __future__ import annotations
@@ -29,9 +34,11 @@ from .labelme_labels import is_labelme, read_labelme_labels
 from .name_table import NameTable, find_name_table, read_name_table
 from .npy_labels import read_npy_labels
 from .png_labels import read_png_labels
+from .propagate_masks import propagate_missing
 from .resize import resize_labels
 
 LabelFormat = Literal["auto", "npy", "png", "coco", "labelme"]
+MissingMasks = Literal["propagate", "leave", "refuse"]
 UNRELIABLE_DIVISOR = 300
 """An object on fewer than H*W/300 pixels of a frame makes that frame's mask unreliable (METHOD.md)."""
 
@@ -52,6 +59,9 @@ class LabelsConfig:
     """Name table {id: name} (mapping.yaml or CoNeRF mapping.yml); default: found next to the input."""
     progress: bool = True
     """Show a progress bar."""
+    missing_masks: MissingMasks = "propagate"
+    """Frames no annotation covers: propagate the annotations to them by optical flow, leave them without
+    masks (listed in frames_without_masks; the mask loss skips them), or refuse (docs/labels-states.md)."""
 
 
 def detect_format(path: Path) -> tuple[str, Path]:
@@ -147,6 +157,14 @@ def ingest_labels(config: LabelsConfig) -> dict:
         raise LabelError(config.input, f"none of the {len(label_set.entries)} labelled frames matches a frame of "
                          f"{frames.root} (ids like {frames.frame_ids[:3]})",
                          "label the extracted frames; names must end in the frame's source index")
+    missing = [f for f in frames.frame_ids if f not in matched]
+    if missing and config.missing_masks == "refuse":
+        shown = ", ".join(missing[:5]) + (", ..." if len(missing) > 5 else "")
+        raise LabelError(config.input, f"{len(missing)} of {len(frames.frame_ids)} frames of {frames.root} have no "
+                         f"annotation (frames {shown}) and --missing-masks refuse was given",
+                         "annotate those frames, or drop --missing-masks refuse to propagate the annotated frames "
+                         "to them by optical flow (or pass --missing-masks leave to train without their masks)")
+    propagate = bool(missing) and config.missing_masks == "propagate"
     by_source = {e.source: e for e in label_set.entries}
     names = list(label_set.names)
     h, w = frames.height, frames.width
@@ -155,6 +173,16 @@ def ingest_labels(config: LabelsConfig) -> dict:
     unreliable: dict[str, list[str]] = {}
     overlaps: dict[str, int] = {}
     src_sizes: set[tuple[int, int]] = set()
+    annotated: dict[str, np.ndarray] = {}
+
+    def record(fid: str, labels: np.ndarray) -> None:
+        pixels = np.bincount(labels.ravel(), minlength=len(names) + 1)[1:]
+        per_frame[fid] = {"pixels": {n: int(p) for n, p in zip(names, pixels, strict=True)},
+                          "coverage": {n: round(float(p) / (h * w), 6) for n, p in zip(names, pixels, strict=True)}}
+        small = [n for n, p in zip(names, pixels, strict=True) if 0 < p < min_pixels]
+        if small:
+            unreliable[fid] = small
+
     with atomic_dir(config.out) as tmp:
         order = [f for f in frames.frame_ids if f in matched]
         for fid in tqdm(order, desc="labels", unit="frame", disable=not config.progress):
@@ -163,12 +191,9 @@ def ingest_labels(config: LabelsConfig) -> dict:
             src_sizes.add(label_map.labels.shape[:2])
             labels = resize_labels(label_map.labels, (h, w), entry.source).astype(np.int64)
             write_mask(tmp, fid, label_map_to_onehot(labels - 1, len(names)))
-            pixels = np.bincount(labels.ravel(), minlength=len(names) + 1)[1:]
-            per_frame[fid] = {"pixels": {n: int(p) for n, p in zip(names, pixels, strict=True)},
-                              "coverage": {n: round(float(p) / (h * w), 6) for n, p in zip(names, pixels, strict=True)}}
-            small = [n for n, p in zip(names, pixels, strict=True) if 0 < p < min_pixels]
-            if small:
-                unreliable[fid] = small
+            record(fid, labels)
+            if propagate:
+                annotated[fid] = labels.astype(np.uint16)
             if label_map.overlap_pixels:
                 overlaps[fid] = label_map.overlap_pixels
         write_yaml(tmp / "mapping.yaml", {k + 1: n for k, n in enumerate(names)})
@@ -185,11 +210,31 @@ def ingest_labels(config: LabelsConfig) -> dict:
             "n_labelled": len(order),
             "min_reliable_pixels": min_pixels,
             "unreliable_rule": f"an object present on fewer than H*W/{UNRELIABLE_DIVISOR} pixels",
-            "frames_without_masks": [f for f in frames.frame_ids if f not in matched],
+            "frames_without_masks": missing,
             "unreliable_frames": unreliable,
             "overlap_pixels": overlaps,
             "labels_without_frame": unmatched,
             "frames": per_frame,
         }
+        if propagate:
+            result = propagate_missing(tmp, frames, annotated, names, progress=config.progress,
+                                       on_frame=lambda fid, lab: record(fid, lab.astype(np.int64)))
+            for fid, sources in result.sources.items():
+                per_frame[fid]["propagated_from"] = sources
+                per_frame[fid]["confidence"] = round(result.mean_confidence[fid], 5)
+            loo = result.report["leave_one_out"]
+            summary.update({
+                "frames_without_masks": [],
+                "missing_masks": config.missing_masks,
+                "annotated_frames": order,
+                "propagated_frames": result.frames,
+                "propagation": {"file": "propagation.json", "confidence_file": "confidence.csv",
+                                "mean_confidence": result.report["mean_confidence"],
+                                "leave_one_out_mean_iou": loo.get("mean_iou_all"),
+                                "leave_one_out_n": loo.get("n", 0)},
+                "unreliable_frames": {f: unreliable[f] for f in frames.frame_ids if f in unreliable},
+                "frames": {f: per_frame[f] for f in frames.frame_ids},
+            })
+            write_json(tmp / "propagation.json", result.report)
         write_json(tmp / "labels.json", summary)
     return summary

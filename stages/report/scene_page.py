@@ -10,6 +10,7 @@ from typing import Any
 
 from .html_parts import fmt, missing, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
+from .labels_section import section_labels
 from .paired import LIVESCENE, PairedResult, compare
 from .scene_data import MethodData, SceneData
 from .svg_plot import Series, bar_chart_svg, line_plot_svg
@@ -19,6 +20,7 @@ SECTIONS = [
     ("rules", "Rules run and skipped"),
     ("timings", "Stage timings"),
     ("poses", "Pose quality"),
+    ("labels", "Object masks"),
     ("states", "Interpolation errors"),
     ("methods", "Methods"),
     ("verdict", "Verdict: LiveScene against each baseline"),
@@ -495,6 +497,7 @@ def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
     nav = "<nav>" + "".join(f'<a href="#{k}">{escape(t)}</a>' for k, t in SECTIONS) + "</nav>"
     sliders, images = section_sliders(sd)
     bodies = {"rules": section_rules(sd), "timings": section_timings(sd), "poses": section_poses(sd),
+              "labels": section_labels(sd, _why_skipped(sd, "labels")),
               "states": section_states(sd), "methods": section_methods(sd), "verdict": section_verdict(sd),
               "curves": section_curves(sd),
               "grid": section_grid(sd, views), "sliders": sliders, "relevancy": section_relevancy(sd),

@@ -15,8 +15,10 @@ from stages.labels.cli import main as labels_main
 from stages.scene import onehot_to_label_map
 
 
-def ingest(src: Path, frames: Path, out: Path, fmt: str = "auto", mapping: Path | None = None) -> dict:
-    return ingest_labels(LabelsConfig(input=src, frames=frames, out=out, format=fmt, mapping=mapping, progress=False))
+def ingest(src: Path, frames: Path, out: Path, fmt: str = "auto", mapping: Path | None = None,
+           missing_masks: str = "propagate") -> dict:
+    return ingest_labels(LabelsConfig(input=src, frames=frames, out=out, format=fmt, mapping=mapping, progress=False,
+                                      missing_masks=missing_masks))
 
 
 def read_masks(out: Path) -> dict[str, np.ndarray]:
@@ -33,7 +35,7 @@ def test_four_formats_give_identical_canonical_masks(label_files):
     }
     results = {}
     for fmt, src in sources.items():
-        summary = ingest(src, label_files.frames, root / f"out_{fmt}")
+        summary = ingest(src, label_files.frames, root / f"out_{fmt}", missing_masks="leave")
         assert summary["format"] == fmt  # auto detection
         assert summary["objects"] == list(NAMES)
         results[fmt] = read_masks(root / f"out_{fmt}")
@@ -55,7 +57,7 @@ def test_four_formats_give_identical_canonical_masks(label_files):
 def test_labels_json_reports_coverage_missing_and_unreliable_frames(label_files):
     src = write_png(label_files.root, label_files.labels)
     out = label_files.root / "out"
-    ingest(src, label_files.frames, out)
+    ingest(src, label_files.frames, out, missing_masks="leave")  # the default would propagate to frame 00006
     summary = json.loads((out / "labels.json").read_text())
     assert summary["frames_without_masks"] == ["00006"]
     assert summary["min_reliable_pixels"] == pytest.approx(HEIGHT * WIDTH / 300)

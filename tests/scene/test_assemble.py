@@ -54,7 +54,9 @@ def make_stage_outputs(root: Path, registered: list[int] | None = None) -> dict[
     (poses / "scene.json").write_text(json.dumps({"scene_box": [[-1, -1, -1], [1, 1, 1]], "units": "colmap"}))
 
     labels = root / "labels"
-    ingest_labels(LabelsConfig(input=root / "masks_png", frames=frames, out=labels, progress=False))
+    # frame 00012 has no mask and stays without one (not propagated): what assemble does with such frames
+    ingest_labels(LabelsConfig(input=root / "masks_png", frames=frames, out=labels, progress=False,
+                               missing_masks="leave"))
     keys = root / "key_frame_value.yaml"
     keys.write_text(yaml.safe_dump({"frame_00000": {"door": 0.0, "drawer": 1.0}, "frame_00009": {"door": 1.0},
                                     "frame_00015": {"drawer": 0.0, "door": 0.5}}))
