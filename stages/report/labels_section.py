@@ -10,22 +10,15 @@ from html import escape
 from pathlib import Path
 
 from .html_parts import fmt, missing, table
-from .scene_data import SceneData, read_csv_rows, read_json
+from .scene_data import SceneData, csv_number, read_csv_rows, read_json
 from .svg_plot import Series, line_plot_svg
-
-
-def _number(value: str | None) -> float | None:
-    try:
-        return float(value) if value not in (None, "") else None
-    except ValueError:
-        return None
 
 
 def _confidence_plot(rows: list[dict[str, str]], objects: list[str]) -> str:
     x = [float(i) for i in range(len(rows))]
-    series = [Series("all pixels", x, [_number(r.get("mean_confidence")) or float("nan") for r in rows])]
+    series = [Series("all pixels", x, [csv_number(r.get("mean_confidence")) or float("nan") for r in rows])]
     for name in objects:
-        ys = [_number(r.get(f"confidence_{name}")) for r in rows]
+        ys = [csv_number(r.get(f"confidence_{name}")) for r in rows]
         series.append(Series(name, x, [float("nan") if v is None else v for v in ys]))
     return line_plot_svg(series, x_label="frame (position in frames.csv; annotated frames at 1)",
                          y_label="mean pixel confidence", title="Confidence of the propagated masks")

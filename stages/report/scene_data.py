@@ -57,9 +57,10 @@ def read_benchmarks(folder: Path) -> dict[str, dict[str, float]]:
     return out
 
 
-def _number(row: dict[str, str], key: str) -> float | None:
+def csv_number(value: str | None) -> float | None:
+    """A CSV cell as a number; None for an empty or non-numeric cell."""
     try:
-        return float(row.get(key) or "")
+        return float(value) if value not in (None, "") else None
     except ValueError:
         return None
 
@@ -72,10 +73,10 @@ def train_curve(path: Path, axis: str = "wall_s") -> tuple[list[float], list[flo
     """
     xs, ps, lx, ls = [], [], [], []
     for row in read_csv_rows(path):
-        x = _number(row, axis)
+        x = csv_number(row.get(axis))
         if x is None:
             continue
-        psnr, loss = _number(row, "eval_psnr"), _number(row, "loss")
+        psnr, loss = csv_number(row.get("eval_psnr")), csv_number(row.get("loss"))
         if psnr is not None:
             xs.append(x)
             ps.append(psnr)
