@@ -40,7 +40,7 @@ from .resize import resize_labels
 LabelFormat = Literal["auto", "npy", "png", "coco", "labelme"]
 MissingMasks = Literal["propagate", "leave", "refuse"]
 UNRELIABLE_DIVISOR = 300
-"""An object on fewer than H*W/300 pixels of a frame makes that frame's mask unreliable (METHOD.md)."""
+"""An object on fewer than H*W/300 pixels of a frame makes that frame's mask unreliable (docs/method.md section 5)."""
 
 
 @dataclass
