@@ -18,9 +18,12 @@ _SLUG_UNSAFE = re.compile(r"[^A-Za-z0-9.-]+")
 def parse_state_string(text: str, objects: Sequence[str], where: str = "--states") -> dict[str, float]:
     """``"cabinet=1, drawer=0.5"`` -> ``{"cabinet": 1.0, "drawer": 0.5}``; every value in [0, 1].
 
-    An empty string means "every object closed". Errors name the option, the problem and the fix.
+    An empty string means "every object closed"; ``all=V`` (unless an object is called ``all``) sets every
+    object the string does not name to V, so a workflow can ask for "everything open" without knowing the
+    scene's names. Errors name the option, the problem and the fix.
     """
     out: dict[str, float] = {}
+    every: float | None = None
     for item in (p.strip() for p in text.split(",")):
         if not item:
             continue
@@ -28,19 +31,30 @@ def parse_state_string(text: str, objects: Sequence[str], where: str = "--states
             raise InputError(where, f"{item!r} in {text!r} is not OBJECT=VALUE",
                              f'write e.g. --states "{objects[0] if objects else "fridge"}=1"')
         name, _, value = (s.strip() for s in item.partition("="))
+        if name == "all" and name not in objects:
+            if every is not None:
+                raise InputError(where, f"'all' is given twice in {text!r}", "give all=VALUE once")
+            every = _state_value(item, value, where)
+            continue
         if name not in objects:
             raise InputError(where, f"unknown object {name!r} in {text!r}", f"use one of {list(objects)}")
         if name in out:
             raise InputError(where, f"object {name!r} is given twice in {text!r}", "name each object once")
-        try:
-            v = float(value)
-        except ValueError as exc:
-            raise InputError(where, f"{item!r}: {value!r} is not a number", "write a value in [0, 1]") from exc
-        if not math.isfinite(v) or not 0.0 <= v <= 1.0:
-            raise InputError(where, f"{item!r}: state {value} is outside [0, 1]",
-                             "0 is closed, 1 fully open; write a value in between")
-        out[name] = v
+        out[name] = _state_value(item, value, where)
+    if every is not None:
+        out = {name: out.get(name, every) for name in objects}
     return out
+
+
+def _state_value(item: str, value: str, where: str) -> float:
+    try:
+        v = float(value)
+    except ValueError as exc:
+        raise InputError(where, f"{item!r}: {value!r} is not a number", "write a value in [0, 1]") from exc
+    if not math.isfinite(v) or not 0.0 <= v <= 1.0:
+        raise InputError(where, f"{item!r}: state {value} is outside [0, 1]",
+                         "0 is closed, 1 fully open; write a value in between")
+    return v
 
 
 def full_state(states: dict[str, float], objects: Sequence[str]) -> dict[str, float]:

@@ -15,6 +15,7 @@ from stages.capture.geometry import build_scene
 from stages.export import ExportOptions, export_run, read_glb
 from stages.export.cli import main as export_main
 from stages.export.geometry_compare import chamfer_distance, inside_box
+from stages.export.state_spec import parse_state_string
 from stages.scene import InputError
 
 
@@ -193,3 +194,16 @@ def test_mesh_formats_round_trip(tmp_path):
     write_geometry(tmp_path / "points.glb", points)
     assert read_glb(tmp_path / "points.glb")["mode"] == 0
     assert Path(tmp_path / "points.glb").stat().st_size > 96
+
+
+def test_all_sets_every_object_the_string_does_not_name():
+    objects = ["cabinet", "drawer"]
+    assert parse_state_string("all=1", objects) == {"cabinet": 1.0, "drawer": 1.0}
+    assert parse_state_string("all=1,drawer=0.25", objects) == {"cabinet": 1.0, "drawer": 0.25}
+    assert parse_state_string("", objects) == {}
+    # an object really called "all" keeps its name
+    assert parse_state_string("all=0.5", ["all", "drawer"]) == {"all": 0.5}
+    with pytest.raises(InputError, match="'all' is given twice"):
+        parse_state_string("all=1,all=0", objects)
+    with pytest.raises(InputError, match=r"outside \[0, 1\]"):
+        parse_state_string("all=2", objects)
