@@ -16,6 +16,7 @@ from stages.export import ExportOptions, export_run, read_glb
 from stages.export.cli import main as export_main
 from stages.export.geometry_compare import chamfer_distance, inside_box
 from stages.export.state_spec import parse_state_string
+from stages.report.export_section import section_export
 from stages.scene import InputError
 
 
@@ -98,6 +99,21 @@ def test_export_json_records_sizes_counts_timings_and_thumbnails(drawer_export):
         thumb = cv2.imread(str(out / record["thumbnail"]))
         assert thumb.shape[1] == 320 and thumb.std() > 10  # a picture, not a blank
     assert not list(out.parent.glob(".export*")), "no temporary folder left behind"
+
+
+def test_the_report_section_shows_each_state_with_counts_sizes_timings_and_thumbnail(drawer_export, tmp_path):
+    _, _, out, doc = drawer_export
+    html = section_export({"livescene": out})
+    for record in doc["exports"]:
+        mesh = record["files"]["scene_mesh"]
+        assert f"{mesh['vertices']:,} v / {mesh['triangles']:,} t" in html
+        assert f"{mesh['bytes'] / 2**20:.2f} MiB" in html
+        assert f"{record['timings_s']['total']:.3f}" in html
+    assert "cabinet=0, drawer=0" in html and "cabinet=0, drawer=1" in html
+    assert html.count("data:image/png;base64,") == len(doc["exports"])
+    assert "drawer part" in html  # object parts get their own column
+    assert "export.json is missing" in section_export({"livescene": tmp_path})
+    assert "no method" in section_export({})
 
 
 def test_objects_need_a_probability_field(tiny_capture_dataset, tmp_path):

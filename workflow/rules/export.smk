@@ -1,0 +1,39 @@
+# Export: the room as a mesh and a point cloud at chosen object states (docs/export.md), with each object's
+# part alone when the scene has masks; the report shows sizes, timings and a thumbnail per state.
+
+
+def export_args(wildcards):
+    c = config["export"]
+    args = [f"--states {shlex.quote(s)}" for s in c["states"]]
+    args += [f"--format {c['format']}", f"--views {c['views']}", f"--scale {c['scale']}"]
+    # object parts come from the rendered object probabilities, which the mask losses train
+    if carries(wildcards.scene, "masks"):
+        args.append("--objects")
+    return " ".join(args)
+
+
+rule export:
+    input:
+        unpack(dataset_input),
+        run=R("{scene}", "runs", "{method}", "run.json"),
+    output:
+        directory(R("{scene}", "export", "{method}")),
+    log:
+        R("{scene}", "logs", "export_{method}.log"),
+    benchmark:
+        R("{scene}", "benchmarks", "export_{method}.tsv")
+    params:
+        cli=LIVESCENE,
+        run=run_folder,
+        args=export_args,
+        device=config["device"],
+    threads: 2
+    resources:
+        mem_mb=6000,
+        runtime=30,
+        gpu=config["gpus"],
+    conda:
+        ENV
+    shell:
+        "{params.cli} export --run {params.run} --data {input.data} {params.args} --out {output}"
+        " --device {params.device} --threads {threads} --no-progress > {log} 2>&1"
