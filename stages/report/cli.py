@@ -1,14 +1,18 @@
 """``livescene report``: state sweeps for the sliders, one HTML page per scene, and the index page.
 
     livescene report sweep --run RUN --data DS --out DIR [--steps 5] [--scale 0.5]
-    livescene report scene --scene NAME --results results/NAME --data DS --methods a,b --out PAGE.html
-    livescene report index --summaries results/*/report/summary.json --out reports/index.html
+    livescene report scene --scene NAME --inputs INPUTS.json --out PAGE.html [--index INDEX.html]
+    livescene report index --summaries S1.json S2.json --out INDEX.html
+
+INPUTS.json names the file or folder of each role the page reads (dataset, poses, runs per method, ...);
+the page reads nothing else. Format: docs/workflow.md, "The report".
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -32,17 +36,18 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
 
     p = sub.add_parser("scene", help="write the self-contained HTML page of one scene")
     p.add_argument("--scene", required=True, help="scene name")
-    p.add_argument("--results", required=True, help="results/<scene> folder")
-    p.add_argument("--data", default="", help="the scene dataset (for truth images and object names)")
-    p.add_argument("--truth", default="", help="capture folder holding truth/ ('' = no truth)")
-    p.add_argument("--methods", default="", help="comma-separated methods of the scene")
+    p.add_argument("--inputs", required=True,
+                   help="report inputs manifest (JSON, or YAML by suffix): role -> path of each input")
+    p.add_argument("--methods", default="",
+                   help="comma-separated methods of the scene, in page order ('' = those the manifest names)")
     p.add_argument("--plan-json", default="{}", help="JSON {rule: {needed, why}} from the workflow")
-    p.add_argument("--stability", default="", help="summary.json of `livescene stability`")
     p.add_argument("--views", type=int, default=3, help="held-out views in the image grid")
     p.add_argument("--out", required=True, help="HTML page to write")
+    p.add_argument("--index", default="",
+                   help="the index page this page links back to (and the summary's link is relative to)")
     p.add_argument("--summary", default="", help="also write the headline numbers (JSON) for the index")
 
-    i = sub.add_parser("index", help="write reports/index.html from the scenes' summaries")
+    i = sub.add_parser("index", help="write the index page from the scenes' summaries (each links its page)")
     i.add_argument("--summaries", nargs="+", required=True, help="summary.json of each scene")
     i.add_argument("--pending", default="", help="comma-separated scenes of the sheet without a page yet")
     i.add_argument("--out", required=True, help="index HTML to write")
@@ -71,6 +76,7 @@ def _sweep(args: argparse.Namespace) -> int:
 def _scene(args: argparse.Namespace) -> int:
     from stages.scene.atomic_io import write_text
 
+    from .inputs import read_inputs
     from .scene_data import collect_scene
     from .scene_page import build_scene_page, scene_summary
 
@@ -78,15 +84,24 @@ def _scene(args: argparse.Namespace) -> int:
         plan = json.loads(args.plan_json)
     except json.JSONDecodeError as exc:
         raise InputError("--plan-json", f"is not JSON ({exc})", "pass the plan the workflow writes") from exc
-    methods = [m for m in args.methods.split(",") if m]
-    sd = collect_scene(args.scene, args.results, data=args.data or None, truth=args.truth or None, methods=methods,
-                       plan=plan, stability=args.stability or None)
-    html = build_scene_page(sd, views=args.views)
-    write_text(Path(args.out), html)
+    methods = [m for m in args.methods.split(",") if m] or None
+    sd = collect_scene(args.scene, read_inputs(args.inputs), methods=methods, plan=plan)
+    page = Path(args.out)
+    index = Path(args.index) if args.index else None
+    html = build_scene_page(sd, views=args.views,
+                            index=_link(index, page.parent) if index is not None else None)
+    write_text(page, html)
     if args.summary:
-        write_json(args.summary, scene_summary(sd))
+        # the index links each page by the summary's "page"; without --index the page's own file URI serves
+        link = _link(page, index.parent) if index is not None else page.resolve().as_uri()
+        write_json(args.summary, scene_summary(sd, page=link))
     print(f"{args.out}: {len(html) / 1e6:.2f} MB")
     return 0
+
+
+def _link(target: Path, start: Path) -> str:
+    """A relative href from folder ``start`` to ``target`` (pages move together with their index)."""
+    return Path(os.path.relpath(target, start)).as_posix()
 
 
 def _index(args: argparse.Namespace) -> int:

@@ -12,8 +12,8 @@ from .html_parts import fmt, page, table
 
 
 def build_index(summary_files: list[str | Path], pending: list[str] | None = None) -> str:
-    """HTML of reports/index.html from the scenes' summary.json files; ``pending`` names the sheet's scenes
-    that have no page yet (a run restricted with ``--config only=...``)."""
+    """HTML of the index page from the scenes' summary.json files (each links its page by its "page"); ``pending``
+    names the sheet's scenes that have no page yet (a run restricted with ``--config only=...``)."""
     rows = []
     for path in summary_files:
         path = Path(path)

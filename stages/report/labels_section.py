@@ -1,13 +1,12 @@
 """The scene page's "Object masks" section: annotated and propagated frames, confidence, leave-one-out IoU.
 
-Reads results/<scene>/labels/ (labels.json, and when masks were propagated from key frames
+Reads the labels folder the report inputs name (labels.json, and when masks were propagated from key frames
 propagation.json and confidence.csv; docs/labels-states.md, "Masks on key frames only").
 """
 
 from __future__ import annotations
 
 from html import escape
-from pathlib import Path
 
 from .html_parts import fmt, missing, table
 from .scene_data import SceneData, csv_number, read_csv_rows, read_json
@@ -44,11 +43,11 @@ def _loo_table(loo: dict, objects: list[str]) -> str:
 
 
 def section_labels(sd: SceneData, skipped: str = "the labels rule did not run for this scene") -> str:
-    """HTML of the section; ``skipped`` says why when results/<scene>/labels/labels.json is absent."""
+    """HTML of the section; ``skipped`` says why when the labels folder (labels.json) is absent."""
     labels = sd.labels
-    if labels is None:
+    folder = sd.inputs.labels
+    if labels is None or folder is None:
         return missing(skipped)
-    folder = Path(sd.results) / "labels"
     objects = [str(o) for o in labels.get("objects", [])]
     n_frames, n_labelled = labels.get("n_frames", 0), labels.get("n_labelled", 0)
     head = (f"<p>{n_labelled} of {n_frames} frames annotated ({escape(str(labels.get('format', '?')))}, objects "

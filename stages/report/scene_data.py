@@ -1,7 +1,8 @@
-"""Everything a scene page shows, read from the files the stages wrote under results/<scene>/.
+"""Everything a scene page shows, read from the stage outputs the report inputs manifest names (inputs.py).
 
 Each reader returns None (or an empty container) when its file is absent, so a page can say which
-rule was skipped instead of breaking.
+rule was skipped instead of breaking. Inside a stage's output the file names are that stage's own
+(run.json, metrics.json, ...); where the outputs lie is only known from the manifest.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from stages.scene import InputError
+
+from .inputs import ReportInputs
 
 
 def _read_text_file(path: Path, parse: Any, what: str, errors: tuple[type[Exception], ...]) -> Any:
@@ -37,23 +40,32 @@ def read_csv_rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(handle))
 
 
+def read_benchmark(path: Path) -> dict[str, float] | None:
+    """The last row of one Snakemake benchmark TSV (s, max_rss, cpu_time, mean_load); None when absent or empty."""
+    if not path.is_file():
+        return None
+    with path.open(newline="") as handle:
+        rows = list(csv.DictReader(handle, delimiter="\t"))
+    if not rows:
+        return None
+    values: dict[str, float] = {}
+    for key in ("s", "max_rss", "cpu_time", "mean_load"):
+        try:
+            values[key] = float(rows[-1].get(key, "nan"))
+        except ValueError:
+            values[key] = float("nan")
+    return values
+
+
 def read_benchmarks(folder: Path) -> dict[str, dict[str, float]]:
     """Snakemake benchmark TSVs (s, max_rss, cpu_time, ...) by rule name (file stem)."""
     out: dict[str, dict[str, float]] = {}
     if not folder.is_dir():
         return out
     for path in sorted(folder.glob("*.tsv")):
-        with path.open(newline="") as handle:
-            rows = list(csv.DictReader(handle, delimiter="\t"))
-        if not rows:
-            continue
-        values: dict[str, float] = {}
-        for key in ("s", "max_rss", "cpu_time", "mean_load"):
-            try:
-                values[key] = float(rows[-1].get(key, "nan"))
-            except ValueError:
-                values[key] = float("nan")
-        out[path.stem] = values
+        values = read_benchmark(path)
+        if values is not None:
+            out[path.stem] = values
     return out
 
 
@@ -116,6 +128,8 @@ class MethodData:
     name: str
     run: dict | None = None
     """run.json of the run (None when training did not finish)."""
+    run_dir: Path | None = None
+    """The run folder (its config.yaml is named in the trust flag)."""
     curve: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
     """train_log.csv as (wall_s, eval_psnr, wall_s, loss)."""
     step_curve: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
@@ -132,6 +146,8 @@ class MethodData:
     sweep_dir: Path | None = None
     control: dict | None = None
     """language-command results of the control rule."""
+    control_dir: Path | None = None
+    """The folder of commands.json, which holds the command renders too."""
 
 
 @dataclass
@@ -139,11 +155,10 @@ class SceneData:
     """The measured numbers and images of one scene."""
 
     scene: str
-    results: Path
-    data: Path | None
-    truth: Path | None
     plan: dict[str, dict]
     benchmarks: dict[str, dict[str, float]]
+    inputs: ReportInputs = field(default_factory=ReportInputs)
+    """Where each input was read from (the manifest)."""
     capture: dict | None = None
     frames: dict | None = None
     poses: dict | None = None
@@ -155,53 +170,86 @@ class SceneData:
     methods: list[MethodData] = field(default_factory=list)
     stability: dict | None = None
 
+    @property
+    def data(self) -> Path | None:
+        """The scene dataset (truth images and object names)."""
+        return self.inputs.dataset
 
-def collect_scene(scene: str, results: str | Path, *, data: str | Path | None, truth: str | Path | None,
-                  methods: list[str], plan: dict[str, dict], stability: str | Path | None = None) -> SceneData:
-    """Read every file of results/<scene>/ the page uses."""
-    root = Path(results)
-    truth_dir = Path(truth) if truth else None
-    sd = SceneData(scene=scene, results=root, data=Path(data) if data else None, truth=truth_dir, plan=plan,
-                   benchmarks=read_benchmarks(root / "benchmarks"))
-    sd.capture = read_json(root / "capture" / "capture.json")
-    sd.frames = read_json(root / "frames" / "frames.json")
-    sd.poses = read_json(root / "poses" / "poses.json")
-    sd.pose_error = read_json(root / "pose_error.json")
-    sd.labels = read_json(root / "labels" / "labels.json")
-    sd.states = read_json(root / "states" / "states.json")
-    if truth_dir is not None and (root / "states" / "states.csv").is_file():
-        sd.states_vs_truth = state_errors_vs_truth(root / "states" / "states.csv", truth_dir / "truth" / "states.csv")
-    if sd.data is not None and (sd.data / "transforms.json").is_file():
-        transforms = read_json(sd.data / "transforms.json") or {}
-        frames = transforms.get("frames", [])
-        mapping_file = sd.data / "mapping.yaml"
-        import yaml
+    @property
+    def truth(self) -> Path | None:
+        """The folder holding truth/."""
+        return self.inputs.truth
 
-        mapping = yaml.safe_load(mapping_file.read_text()) if mapping_file.is_file() else {}
-        sd.dataset_info = {"frames": len(frames),
-                           "train": sum(1 for f in frames if f.get("split") == "train"),
-                           "test": sum(1 for f in frames if f.get("split") == "test"),
-                           "width": transforms.get("w"), "height": transforms.get("h"),
-                           "objects": [str(mapping[k]) for k in sorted(mapping)] if mapping else []}
-    for name in methods:
-        m = MethodData(name=name)
-        run_dir = root / "runs" / name
-        m.run = read_json(run_dir / "run.json")
-        m.curve = train_curve(run_dir / "train_log.csv")
-        m.step_curve = train_curve_by_step(run_dir / "train_log.csv")
-        m.config = read_yaml(run_dir / "config.yaml")
-        eval_dir = root / "eval" / name
+
+def _in(folder: Path | None, name: str) -> Path | None:
+    """``folder / name``, or None when the role is absent."""
+    return None if folder is None else folder / name
+
+
+def _json_in(folder: Path | None, name: str) -> Any:
+    path = _in(folder, name)
+    return None if path is None else read_json(path)
+
+
+def _dataset_info(data: Path) -> dict | None:
+    """Frame counts, image size and object names of the dataset; None without transforms.json."""
+    if not (data / "transforms.json").is_file():
+        return None
+    transforms = read_json(data / "transforms.json") or {}
+    frames = transforms.get("frames", [])
+    mapping_file = data / "mapping.yaml"
+    import yaml
+
+    mapping = yaml.safe_load(mapping_file.read_text()) if mapping_file.is_file() else {}
+    return {"frames": len(frames),
+            "train": sum(1 for f in frames if f.get("split") == "train"),
+            "test": sum(1 for f in frames if f.get("split") == "test"),
+            "width": transforms.get("w"), "height": transforms.get("h"),
+            "objects": [str(mapping[k]) for k in sorted(mapping)] if mapping else []}
+
+
+def collect_method(name: str, inputs: ReportInputs) -> MethodData:
+    """Read the run, evaluation, sweep and commands of one method from the folders the manifest names."""
+    m = MethodData(name=name, run_dir=inputs.run_dir(name))
+    if m.run_dir is not None:
+        m.run = read_json(m.run_dir / "run.json")
+        m.curve = train_curve(m.run_dir / "train_log.csv")
+        m.step_curve = train_curve_by_step(m.run_dir / "train_log.csv")
+        m.config = read_yaml(m.run_dir / "config.yaml")
+    eval_dir = inputs.eval.get(name)
+    if eval_dir is not None:
         m.metrics = read_json(eval_dir / "metrics.json")
         m.timings = read_json(eval_dir / "timings.json")
         m.eval_dir = eval_dir if eval_dir.is_dir() else None
-        sweep_dir = root / "sweep" / name
-        m.sweep = read_json(sweep_dir / "sweep.json")
-        m.sweep_dir = sweep_dir if m.sweep else None
-        m.control = read_json(root / "control" / name / "commands.json")
-        sd.methods.append(m)
-    if stability:
-        sd.stability = read_json(Path(stability))
-        shared = read_benchmarks(Path(stability).parent)  # the suite runs once for all scenes
-        if "benchmark" in shared:
-            sd.benchmarks["stability"] = shared["benchmark"]
+    sweep_dir = inputs.sweep.get(name)
+    m.sweep = _json_in(sweep_dir, "sweep.json")
+    m.sweep_dir = sweep_dir if m.sweep else None
+    m.control_dir = inputs.control.get(name)
+    m.control = _json_in(m.control_dir, "commands.json")
+    return m
+
+
+def collect_scene(scene: str, inputs: ReportInputs, *, methods: list[str] | None = None,
+                  plan: dict[str, dict]) -> SceneData:
+    """Read every input of the page from where ``inputs`` says it is; ``methods`` defaults to the manifest's."""
+    sd = SceneData(scene=scene, plan=plan, inputs=inputs,
+                   benchmarks=read_benchmarks(inputs.benchmarks) if inputs.benchmarks else {})
+    sd.capture = _json_in(inputs.capture, "capture.json")
+    sd.frames = _json_in(inputs.frames, "frames.json")
+    sd.poses = _json_in(inputs.poses, "poses.json")
+    sd.pose_error = read_json(inputs.pose_error) if inputs.pose_error else None
+    sd.labels = _json_in(inputs.labels, "labels.json")
+    sd.states = _json_in(inputs.states, "states.json")
+    states_csv = _in(inputs.states, "states.csv")
+    if inputs.truth is not None and states_csv is not None and states_csv.is_file():
+        sd.states_vs_truth = state_errors_vs_truth(states_csv, inputs.truth / "truth" / "states.csv")
+    if inputs.dataset is not None:
+        sd.dataset_info = _dataset_info(inputs.dataset)
+    sd.methods = [collect_method(name, inputs) for name in (inputs.methods() if methods is None else methods)]
+    if inputs.stability:
+        sd.stability = read_json(inputs.stability)
+    if inputs.stability_benchmark:  # the suite runs once for all scenes: its timing is listed with the scene's
+        shared = read_benchmark(inputs.stability_benchmark)
+        if shared is not None:
+            sd.benchmarks["stability"] = shared
     return sd

@@ -6,8 +6,10 @@ import json
 import math
 import re
 from html import escape
+from pathlib import Path
 from typing import Any
 
+from .export_section import section_export
 from .html_parts import fmt, missing, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
 from .labels_section import section_labels
@@ -31,6 +33,7 @@ SECTIONS = [
     ("unseen", "Unseen state combinations"),
     ("locality", "Locality of control"),
     ("commands", "Language commands"),
+    ("export", "Export: meshes and point clouds"),
     ("stability", "Stability checks"),
 ]
 
@@ -40,8 +43,16 @@ def _why_skipped(sd: SceneData, rule: str) -> str:
     if entry is None:
         return f"rule {rule} is not part of this workflow"
     if entry.get("needed"):
-        return f"rule {rule} was planned but its output is missing (see results/{sd.scene}/logs/)"
+        where = f"see {sd.inputs.logs}/" if sd.inputs.logs is not None else "see the rule's log"
+        return f"rule {rule} was planned but its output is missing ({where})"
     return f"rule {rule} skipped for this scene: {entry.get('why', 'not needed')}"
+
+
+def _section_export(sd: SceneData) -> str:
+    planned = [k[len("export["):-1] for k, v in sd.plan.items() if k.startswith("export[") and v.get("needed")]
+    why = (f"rule export[{planned[0]}] was planned but its output is missing" if planned
+           else "no method of this scene is in export.methods")
+    return section_export(dict(sd.inputs.export), why)
 
 
 def _rule_benchmark(sd: SceneData, rule: str) -> dict | None:
@@ -66,7 +77,8 @@ def section_rules(sd: SceneData) -> str:
 
 def section_timings(sd: SceneData) -> str:
     if not sd.benchmarks:
-        return missing("No benchmark files in results/<scene>/benchmarks/: no rule of this scene has run yet.")
+        folder = f"in {sd.inputs.benchmarks}/" if sd.inputs.benchmarks is not None else "given"
+        return missing(f"No benchmark files {folder}: no rule of this scene has run yet.")
     items = sorted(((k, v["s"]) for k, v in sd.benchmarks.items() if math.isfinite(v["s"])), key=lambda kv: -kv[1])
     total = sum(v for _, v in items)
     rows = [[escape(k), v["s"], v["cpu_time"], v["max_rss"]] for k, v in
@@ -147,7 +159,8 @@ def _metric(m: MethodData, *keys: str) -> Any:
 
 def scene_trust(sd: SceneData) -> dict[str, TrustFlag]:
     """The trust flag of every method that trained or was evaluated."""
-    return {m.name: assess_run(m.name, m.run, m.config, m.metrics, sd.results / "runs" / m.name / "config.yaml")
+    return {m.name: assess_run(m.name, m.run, m.config, m.metrics,
+                               m.run_dir / "config.yaml" if m.run_dir is not None else "config.yaml")
             for m in sd.methods if m.run is not None or m.metrics is not None}
 
 
@@ -444,13 +457,20 @@ def section_commands(sd: SceneData) -> str:
             states = c.get("states")
             shown = ", ".join(f"{k} {v:.2f}" for k, v in states.items()) if isinstance(states, dict) else \
                 escape(json.dumps(states))
-            image = file_data_uri(c["image"]) if c.get("image") else None
+            image = _command_image(m, c["image"]) if c.get("image") else None
             rows.append([escape(c.get("command", "")), escape(shown), _img(image, c.get("command", ""), 160)])
         blocks.append(f"<h3>{escape(m.name)}</h3>" + table(["command", "resulting states", "render"], rows))
     if not blocks:
         first = sd.methods[0].name if sd.methods else "livescene"
         return missing(_why_skipped(sd, f"control[{first}]"))
     return "".join(blocks)
+
+
+def _command_image(m: MethodData, recorded: str) -> str | None:
+    """A command's render: the control stage writes it next to commands.json, so it is looked up in the given
+    folder first (the recorded path only holds where the stage ran)."""
+    beside = m.control_dir / Path(recorded).name if m.control_dir is not None else None
+    return file_data_uri(beside) if beside is not None and beside.is_file() else file_data_uri(recorded)
 
 
 def section_stability(sd: SceneData) -> str:
@@ -469,10 +489,11 @@ def section_stability(sd: SceneData) -> str:
             + table(["case", "group", "result", "metric", "s"], rows))
 
 
-def scene_summary(sd: SceneData) -> dict:
-    """Headline numbers for the index page, with each run's trust flag and the paired verdict."""
+def scene_summary(sd: SceneData, page: str) -> dict:
+    """Headline numbers for the index page, with each run's trust flag and the paired verdict; ``page`` is the
+    link from the index to the scene page."""
     flags = scene_trust(sd)
-    return {"scene": sd.scene, "page": f"scenes/{sd.scene}.html",
+    return {"scene": sd.scene, "page": page,
             "objects": (sd.dataset_info or {}).get("objects", []),
             "frames": (sd.dataset_info or {}).get("frames"),
             "registered_fraction": (sd.poses or {}).get("registered_fraction"),
@@ -487,10 +508,11 @@ def scene_summary(sd: SceneData) -> dict:
             "job_seconds": round(sum(v["s"] for v in sd.benchmarks.values() if math.isfinite(v["s"])), 1)}
 
 
-def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
-    """The complete HTML page of one scene."""
+def build_scene_page(sd: SceneData, *, views: int = 3, index: str | None = None) -> str:
+    """The complete HTML page of one scene; ``index`` is the link back to the index page (none when None)."""
     info = sd.dataset_info or {}
-    head = (f"<h1>Scene {escape(sd.scene)}</h1><p><a href=\"../index.html\">all scenes</a> · dataset "
+    back = f'<a href="{escape(index)}">all scenes</a> · ' if index is not None else ""
+    head = (f"<h1>Scene {escape(sd.scene)}</h1><p>{back}dataset "
             f"{escape(str(sd.data))}: {fmt(info.get('frames'))} frames ({fmt(info.get('train'))} train, "
             f"{fmt(info.get('test'))} test), {fmt(info.get('width'))}x{fmt(info.get('height'))}, objects "
             f"{escape(', '.join(info.get('objects', [])) or '–')}</p>")
@@ -502,7 +524,7 @@ def build_scene_page(sd: SceneData, *, views: int = 3) -> str:
               "curves": section_curves(sd),
               "grid": section_grid(sd, views), "sliders": sliders, "relevancy": section_relevancy(sd),
               "unseen": section_unseen(sd), "locality": section_locality(sd),
-              "commands": section_commands(sd), "stability": section_stability(sd)}
+              "commands": section_commands(sd), "export": _section_export(sd), "stability": section_stability(sd)}
     body = head + nav + "".join(f'<section id="{k}"><h2>{escape(t)}</h2>{bodies[k]}</section>' for k, t in SECTIONS)
     script = SLIDER_SCRIPT % json.dumps(images) if images else ""
     return page(f"LiveScene report: {sd.scene}", body, script)

@@ -8,13 +8,14 @@ from pathlib import Path
 from labelset_writers import write_png
 
 from stages.labels import LabelsConfig, ingest_labels
+from stages.report.inputs import ReportInputs
 from stages.report.labels_section import section_labels
 from stages.report.scene_data import SceneData
 
 
 def scene(results: Path) -> SceneData:
     labels = results / "labels" / "labels.json"
-    return SceneData(scene="s", results=results, data=None, truth=None, plan={}, benchmarks={},
+    return SceneData(scene="s", plan={}, benchmarks={}, inputs=ReportInputs(labels=results / "labels"),
                      labels=json.loads(labels.read_text()) if labels.is_file() else None)
 
 

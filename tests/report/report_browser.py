@@ -1,10 +1,11 @@
-"""Helpers of the report tests: a fake but complete results/<scene>/ tree (Chromium is in
-tests/chromium_page.py)."""
+"""Helpers of the report tests: fake but complete stage outputs of one scene, and the report inputs manifest
+that names them (Chromium is in tests/chromium_page.py)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -19,9 +20,27 @@ def _png(path: Path, rgb: np.ndarray) -> None:
     cv2.imwrite(str(path), rgb[..., ::-1])
 
 
+def fake_inputs(res: Path, data: Path, methods: tuple[str, ...] = ("livescene", "conerf")) -> dict[str, Any]:
+    """The report inputs manifest of a make_fake_results tree (runs named by their run.json, as the workflow
+    does)."""
+    return {"dataset": str(data), "poses": str(res / "poses"), "pose_error": str(res / "pose_error.json"),
+            "states": str(res / "states"), "benchmarks": str(res / "benchmarks"),
+            "runs": {m: str(res / "runs" / m / "run.json") for m in methods},
+            "eval": {m: str(res / "eval" / m) for m in methods},
+            "sweep": {methods[0]: str(res / "sweep" / methods[0])},
+            "control": {methods[0]: str(res / "control" / methods[0])}}
+
+
+def write_inputs(path: Path, manifest: dict[str, Any]) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(manifest, indent=1))
+    return path
+
+
 def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("livescene", "conerf"),
                       objects: tuple[str, ...] = ("object0", "object1", "object2")) -> Path:
-    """results/<scene>/ as the stages write it (same file names and keys), with synthetic numbers and images."""
+    """One folder of stage outputs (same file names and keys as the stages write), with synthetic numbers and
+    images; fake_inputs names its parts."""
     rng = np.random.default_rng(1)
     res = root / "fake"
     bench = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"

@@ -1,11 +1,15 @@
-"""The scene page in a real browser: no console errors, every image loads, the sliders scrub."""
+"""The scene page in a real browser: no console errors, every image loads, the sliders scrub; the page reads
+only the inputs its manifest names, wherever they lie."""
 
 from __future__ import annotations
 
 import json
+import re
+import shutil
 from pathlib import Path
 
-from report_browser import ARTIFACTS, make_fake_results
+import pytest
+from report_browser import ARTIFACTS, fake_inputs, make_fake_results, write_inputs
 
 from stages.report.cli import main as report_main
 
@@ -17,14 +21,19 @@ PLAN = {"capture": {"needed": True, "why": "synthetic spec"}, "frames": {"needed
         "stability": {"needed": False, "why": "stability.run is false"}}
 
 
-def build_page(tmp_path: Path, data: Path, plan: dict = PLAN) -> Path:
-    results = make_fake_results(tmp_path, data)
+def render(tmp_path: Path, manifest: dict, plan: dict = PLAN, methods: str = "livescene,conerf") -> Path:
+    """The page of ``manifest`` at tmp_path/reports/scenes/fake.html (summary at tmp_path/summary.json)."""
     page = tmp_path / "reports" / "scenes" / "fake.html"
-    code = report_main(["scene", "--scene", "fake", "--results", str(results), "--data", str(data),
-                        "--methods", "livescene,conerf", "--plan-json", json.dumps(plan), "--out", str(page),
+    code = report_main(["scene", "--scene", "fake", "--inputs", str(write_inputs(tmp_path / "inputs.json", manifest)),
+                        "--methods", methods, "--plan-json", json.dumps(plan), "--out", str(page),
+                        "--index", str(tmp_path / "reports" / "index.html"),
                         "--summary", str(tmp_path / "summary.json")])
     assert code == 0
     return page
+
+
+def build_page(tmp_path: Path, data: Path, plan: dict = PLAN) -> Path:
+    return render(tmp_path, fake_inputs(make_fake_results(tmp_path, data), data), plan)
 
 
 def test_page_in_chromium(tmp_path, tiny_dataset, chromium):
@@ -77,8 +86,9 @@ def test_page_without_evaluations(tmp_path, tiny_dataset):
     page = tmp_path / "empty.html"
     plan = {"train[livescene]": {"needed": False, "why": "method not listed for this scene"},
             "sweep[livescene]": {"needed": False, "why": "not in report.sweep_methods"}}
-    assert report_main(["scene", "--scene", "empty", "--results", str(tmp_path / "nothing"), "--data", str(data),
-                        "--methods", "livescene", "--plan-json", json.dumps(plan), "--out", str(page)]) == 0
+    inputs = write_inputs(tmp_path / "inputs.json", {"dataset": str(data)})
+    assert report_main(["scene", "--scene", "empty", "--inputs", str(inputs), "--methods", "livescene",
+                        "--plan-json", json.dumps(plan), "--out", str(page)]) == 0
     html = page.read_text()
     assert "not in report.sweep_methods" in html
     assert "No periodic evaluation" in html
@@ -86,7 +96,124 @@ def test_page_without_evaluations(tmp_path, tiny_dataset):
 
 
 def test_bad_plan_json_is_an_input_error(tmp_path, capsys):
-    code = report_main(["scene", "--scene", "x", "--results", str(tmp_path), "--plan-json", "{nope",
-                        "--out", str(tmp_path / "x.html")])
+    code = report_main(["scene", "--scene", "x", "--inputs", str(write_inputs(tmp_path / "in.json", {})),
+                        "--plan-json", "{nope", "--out", str(tmp_path / "x.html")])
     assert code == 2
     assert "--plan-json" in capsys.readouterr().err
+
+
+# -- the page reads only its inputs -----------------------------------------------------------------------------
+
+# Where the fake outputs are moved to: no folder name the workflow uses, runs named by their folder this time.
+SCATTERED = {"poses": "a/cameras", "pose_error": "a/b/cam-vs-truth.json", "states": "s/t", "benchmarks": "timing",
+             "runs": {"livescene": "a/b/train-ls", "conerf": "c/conerf-run"},
+             "eval": {"livescene": "a/b/eval-x", "conerf": "eval-y"},
+             "sweep": {"livescene": "sl/ider"}, "control": {"livescene": "cmds"}}
+
+
+def test_page_from_an_arbitrary_layout_matches(tmp_path, tiny_dataset):
+    """Outputs put anywhere, named by the manifest, give the very same page as the fake tree."""
+    data = tiny_dataset.root
+    reference = build_page(tmp_path / "ref", data).read_text()
+    source = fake_inputs(make_fake_results(tmp_path / "src", data), data)
+    manifest: dict = {"dataset": str(data)}
+    for role, target in SCATTERED.items():
+        if isinstance(target, dict):
+            manifest[role] = {}
+            for method, folder in target.items():
+                origin = Path(source[role][method])
+                origin = origin.parent if origin.suffix == ".json" else origin  # a run folder, not its run.json
+                manifest[role][method] = str(_move(origin, tmp_path / "x" / folder))
+        else:
+            manifest[role] = str(_move(Path(source[role]), tmp_path / "x" / target))
+    shutil.rmtree(tmp_path / "src")  # nothing is left where the outputs were written
+    html = render(tmp_path / "out", manifest).read_text()
+    assert html == reference
+    for section in ("timings", "poses", "methods", "verdict", "curves", "grid", "sliders", "relevancy", "unseen",
+                    "locality", "commands"):
+        body = html.split(f'<section id="{section}">')[1].split("</section>")[0]
+        assert 'class="missing"' not in body, section
+    assert html.count('class="sweep"') == 3 and "open the object0" in html
+
+
+def _move(origin: Path, target: Path) -> Path:
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.move(origin, target)
+    return target
+
+
+def test_absent_roles_say_why(tmp_path, tiny_dataset):
+    """A manifest without poses, states or the sweep (stages the plan left out): those sections say why."""
+    data = tiny_dataset.root
+    manifest = fake_inputs(make_fake_results(tmp_path, data), data)
+    for role in ("poses", "pose_error", "states", "sweep"):
+        del manifest[role]
+    plan = PLAN | {"poses": {"needed": False, "why": "poses come with the data"},
+                   "states": {"needed": False, "why": "poses come with the data"},
+                   "sweep[livescene]": {"needed": False, "why": "not in report.sweep_methods"}}
+    html = render(tmp_path, manifest, plan).read_text()
+    for section in ("poses", "states", "sliders"):
+        body = html.split(f'<section id="{section}">')[1].split("</section>")[0]
+        assert 'class="missing"' in body and "skipped for this scene" in body, section
+    methods = html.split('<section id="methods">')[1].split("</section>")[0]
+    assert "21.000" in methods  # the roles that are given still fill their sections
+
+
+def test_methods_default_to_the_manifest_and_links_follow_the_index(tmp_path, tiny_dataset):
+    data = tiny_dataset.root
+    manifest = write_inputs(tmp_path / "in.json", fake_inputs(make_fake_results(tmp_path, data), data))
+    page, summary = tmp_path / "site" / "pages" / "deep" / "fake.html", tmp_path / "s.json"
+    assert report_main(["scene", "--scene", "fake", "--inputs", str(manifest), "--out", str(page),
+                        "--index", str(tmp_path / "site" / "all.html"), "--summary", str(summary)]) == 0
+    html = page.read_text()
+    assert '<a href="../../all.html">all scenes</a>' in html
+    assert json.loads(summary.read_text())["page"] == "pages/deep/fake.html"
+    assert list(json.loads(summary.read_text())["methods"]) == ["livescene", "conerf"]  # the manifest's order
+    # without --index: no link back, and the summary links the page by its file URI
+    assert report_main(["scene", "--scene", "fake", "--inputs", str(manifest), "--out", str(page),
+                        "--summary", str(summary)]) == 0
+    assert "all scenes" not in page.read_text()
+    assert json.loads(summary.read_text())["page"] == page.resolve().as_uri()
+
+
+def test_a_yaml_manifest_gives_the_same_page(tmp_path, tiny_dataset):
+    import yaml
+
+    data = tiny_dataset.root
+    reference = build_page(tmp_path / "ref", data).read_text()
+    manifest = json.loads((tmp_path / "ref" / "inputs.json").read_text())
+    (tmp_path / "inputs.yaml").write_text(yaml.safe_dump(manifest))
+    page = tmp_path / "reports" / "scenes" / "fake.html"
+    assert report_main(["scene", "--scene", "fake", "--inputs", str(tmp_path / "inputs.yaml"), "--methods",
+                        "livescene,conerf", "--plan-json", json.dumps(PLAN), "--out", str(page),
+                        "--index", str(tmp_path / "reports" / "index.html")]) == 0
+    assert page.read_text() == reference
+
+
+@pytest.mark.parametrize(("manifest", "message"), [
+    ('{"results": "results/fake"}', "unknown role(s) ['results']"),
+    ('{"poses": 3}', "role 'poses' is 3, not a path"),
+    ('{"eval": "eval/livescene"}', "role 'eval' is 'eval/livescene', not a mapping of method -> path"),
+    ('["poses"]', "is list, not a mapping of role -> path"),
+    ("{poses", "is not JSON"),
+])
+def test_bad_manifest_is_an_input_error(tmp_path, capsys, manifest, message):
+    (tmp_path / "inputs.json").write_text(manifest)
+    code = report_main(["scene", "--scene", "x", "--inputs", str(tmp_path / "inputs.json"),
+                        "--out", str(tmp_path / "x.html")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "inputs.json") in err and message in err
+    assert not (tmp_path / "x.html").exists()
+
+
+def test_report_code_names_no_workflow_folder():
+    """The stage knows no layout: where its inputs lie comes from the manifest only."""
+    folders = "runs|eval|sweep|control|benchmarks|logs|capture|frames|poses|labels|states|language|stability|report"
+    joined = re.compile(rf'/ "({folders}|scenes|dataset|truth_dataset)"')  # e.g. root / "runs"
+    root = Path(__file__).resolve().parents[2] / "stages" / "report"
+    for path in sorted(root.glob("*.py")):
+        text = path.read_text()
+        assert not joined.search(text), (path.name, joined.search(text))
+        for layout in ("results/", "reports/", "scenes/", "pose_error.json", "index.html"):
+            assert layout not in text, (path.name, layout)

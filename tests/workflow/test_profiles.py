@@ -13,7 +13,7 @@ import yaml
 from snakemake.profiles import ProfileConfigFileParser
 from workflow_copy import REPO, SnakemakeRun, WorkflowCopy
 
-GPU_RULES = {"train", "evaluate", "sweep", "control"}  # every rule that trains a model or renders with one
+GPU_RULES = {"train", "evaluate", "sweep", "control", "export"}  # every rule that trains a model or renders with one
 
 
 def resources(text: str) -> dict[str, str]:

@@ -142,3 +142,37 @@ def states_args(wildcards, input):
                 f" --mapping {Path(input.capture, 'mapping.yaml')}")
     names = f" --mapping {input.names}" if "names" in input.keys() else ""
     return f"--key-frames {input.key_frames}{names}"
+
+
+def report_scene_input(wildcards):
+    """Everything the scene page reads: scene_outputs, plus the truth folder (its states check the interpolation)."""
+    scene = wildcards.scene
+    files = scene_outputs(scene)
+    if has_truth(scene):
+        files["truth"] = truth_dir(scene)
+    return files
+
+
+# rule input name -> role of the report inputs manifest (docs/workflow.md, "The report"); per-method inputs
+# are named <prefix>_<method>
+REPORT_ROLES = {"dataset_data": "dataset", "truth": "truth", "capture": "capture", "poses": "poses",
+                "pose_error": "pose_error", "labels": "labels", "states": "states", "targets": "language",
+                "stability": "stability"}
+REPORT_METHOD_ROLES = {"run": "runs", "eval": "eval", "sweep": "sweep", "control": "control",
+                       "export": "export"}
+
+
+def report_manifest(wildcards, input):
+    """JSON of `livescene report scene --inputs`: each role -> its path, taken from the rule's named inputs (a
+    role whose rule the plan leaves out is absent), plus the benchmark and log folders, which no rule outputs."""
+    scene, names = wildcards.scene, input.keys()
+    manifest = {role: input[key] for key, role in REPORT_ROLES.items() if key in names}
+    for m in methods(scene):
+        for prefix, role in REPORT_METHOD_ROLES.items():
+            if f"{prefix}_{m}" in names:
+                manifest.setdefault(role, {})[m] = input[f"{prefix}_{m}"]
+    if "stability" in manifest:
+        manifest["stability_benchmark"] = str(rules.stability.benchmark)
+    manifest["benchmarks"] = R(scene, "benchmarks")
+    manifest["logs"] = R(scene, "logs")
+    return json.dumps(manifest)

@@ -134,6 +134,9 @@ def plan(scene):
         control = sweep and has_names(scene)
         p[f"control[{m}]"] = (control, "language commands" if control
                               else "scene has no names" if not has_names(scene) else "not in report.sweep_methods")
+        export = m in config["export"]["methods"]
+        p[f"export[{m}]"] = (export, "meshes at " + " / ".join(config["export"]["states"]) if export
+                             else "not in export.methods")
     p["stability"] = (config["stability"]["run"], "stability suite (once for all scenes)"
                       if config["stability"]["run"] else "stability.run is false")
     return p
@@ -166,6 +169,8 @@ def scene_outputs(scene):
             out[f"sweep_{m}"] = R(scene, "sweep", m)
         if needed(scene, f"control[{m}]"):
             out[f"control_{m}"] = R(scene, "control", m)
+        if needed(scene, f"export[{m}]"):
+            out[f"export_{m}"] = R(scene, "export", m)
     if config["stability"]["run"]:
         out["stability"] = str(Path(RESULTS, "stability", "summary.json"))
     return out

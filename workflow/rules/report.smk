@@ -31,7 +31,7 @@ rule sweep:
 
 rule report_scene:
     input:
-        unpack(lambda w: scene_outputs(w.scene)),
+        unpack(report_scene_input),
     output:
         page=report(
             str(Path(REPORTS, "scenes", "{scene}.html")),
@@ -40,18 +40,18 @@ rule report_scene:
             labels={"page": "{scene}"},
         ),
         summary=R("{scene}", "report", "summary.json"),
+        # The page reads only what this manifest names (role -> path, from the inputs above).
+        inputs=R("{scene}", "report", "inputs.json"),
     log:
         log_path("report"),
     benchmark:
         bench_path("report")
     params:
         cli=LIVESCENE,
+        manifest=report_manifest,
         plan=lambda w: json.dumps({k: {"needed": v[0], "why": v[1]} for k, v in plan(w.scene).items()}),
         methods=lambda w: ",".join(methods(w.scene)),
-        results=lambda w: R(w.scene),
-        data=lambda w: dataset_dir(w.scene),
-        truth=lambda w: f"--truth {shlex.quote(truth_dir(w.scene))}" if has_truth(w.scene) else "",
-        stability=str(Path(RESULTS, "stability", "summary.json")),
+        index=str(Path(REPORTS, "index.html")),
         views=config["report"]["grid_views"],
     threads: 1
     resources:
@@ -60,10 +60,10 @@ rule report_scene:
     conda:
         ENV
     shell:
-        "{params.cli} report scene --scene {wildcards.scene} --results {params.results} --data {params.data}"
-        " {params.truth} --methods {params.methods} --plan-json {params.plan:q}"
-        " --stability {params.stability} --views {params.views} --out {output.page} --summary {output.summary}"
-        " > {log} 2>&1"
+        "printf '%s\\n' {params.manifest:q} > {output.inputs}"
+        " && {params.cli} report scene --scene {wildcards.scene} --inputs {output.inputs}"
+        " --methods {params.methods} --plan-json {params.plan:q} --views {params.views}"
+        " --out {output.page} --index {params.index} --summary {output.summary} > {log} 2>&1"
 
 
 rule report_index:
