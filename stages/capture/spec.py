@@ -1,6 +1,7 @@
 """The scene spec of a synthetic capture: a room, furniture, articulated objects, a camera path.
 
-A spec is YAML that maps one to one onto the dataclasses below. Geometry is
+A spec is YAML that maps one to one onto the dataclasses below, each value
+checked against the field's type (stages/scene/typed_yaml.py). Geometry is
 written in metres; ``units.per_metre`` scales every output coordinate (poses,
 depth, scene box) so a capture can live in millimetres without the spec
 changing. World axes: z up, floor at z = 0, the room centred on x = y = 0.
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from stages.scene import InputError, read_yaml_mapping
+from stages.scene.typed_yaml import from_mapping
 
 OBJECT_KINDS = ("door", "drawer", "lid")
 HINGES = {"door": ("left", "right", "top", "bottom"), "lid": ("back",), "drawer": ("front",)}
@@ -230,48 +232,10 @@ class CaptureSpec:
         return [o.name for o in self.objects]
 
 
-def _build(cls: type, data: Any, path: Path, where: str) -> Any:
-    """Instantiate dataclass ``cls`` from a mapping, recursing into nested dataclass fields."""
-    if not isinstance(data, dict):
-        raise CaptureSpecError(path, f"{where} is {type(data).__name__}, expected a mapping",
-                               f"write {where} as key: value pairs")
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise CaptureSpecError(path, f"{where} has unknown keys {unknown}",
-                               f"use only {sorted(fields)} (see stages/capture/spec.py)")
-    kwargs = {}
-    nested = {"lights": LightSpec, "objects": ObjectSpec, "furniture": FurnitureSpec}
-    for key, value in data.items():
-        ftype = fields[key].type
-        sub = f"{where}.{key}"
-        target = _NESTED.get(ftype) if isinstance(ftype, str) else None
-        if target is not None:
-            value = _build(target, value, path, sub)
-        elif key in nested and isinstance(value, list):
-            value = [_build(nested[key], v, path, f"{sub}[{i}]") for i, v in enumerate(value)]
-        kwargs[key] = value
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:
-        raise CaptureSpecError(path, f"{where}: {exc}", "add the missing required keys") from exc
-
-
-_NESTED = {
-    "Units": Units,
-    "VideoSpec": VideoSpec,
-    "RenderSpec": RenderSpec,
-    "ScheduleSpec": ScheduleSpec,
-    "JitterSpec": JitterSpec,
-    "CameraPathSpec": CameraPathSpec,
-    "KeyFrameSpec": KeyFrameSpec,
-}
-
-
 def spec_from_dict(data: dict[str, Any], path: str | Path = "<spec>") -> CaptureSpec:
-    """Build and validate a spec from parsed YAML."""
+    """Build a spec from parsed YAML (types checked against the fields), then check it can be rendered."""
     path = Path(path)
-    spec = _build(CaptureSpec, data, path, "spec")
+    spec = from_mapping(CaptureSpec, data, path=path, root="spec", error=CaptureSpecError)
     validate_spec(spec, path)
     return spec
 

@@ -1,7 +1,8 @@
 """Every hyperparameter of the model stage, as nested dataclasses built from a preset YAML.
 
 A preset (``config/model/<name>.yaml``) gives any subset of the fields below;
-``--set section.field=value`` overrides one field from the command line. The
+``--set section.field=value`` overrides one field from the command line. Every
+value must have its field's type, nothing is converted (docs/model.md, Presets). The
 defaults are the reference settings of docs/method.md; where the paper and the
 authors' code disagree, the field's docstring says which one the default follows.
 """
@@ -9,13 +10,15 @@ authors' code disagree, the field's docstring says which one the default follows
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
 from stages.scene import InputError, read_yaml_mapping
+from stages.scene.typed_yaml import from_mapping
 
 PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "model"
 
@@ -112,7 +115,7 @@ class SamplingConfig:
 class StateConfig:
     """Given or learned object states (docs/method.md section 6)."""
 
-    mode: str = "given"
+    mode: Literal["given", "learned"] = "given"
     """'given' (dense states from the dataset) or 'learned' (key frames supervise a state network)."""
     grid_resolution: int = 256
     """Cells of the 1D grid over normalised frame index (257 vertices, as the reference)."""
@@ -134,7 +137,7 @@ class LanguageConfig:
 
     buckets: int = 0
     """State buckets per object in the table; 0 = as many as the targets file has levels."""
-    interpolate_by: str = "kappa"
+    interpolate_by: Literal["kappa", "frame"] = "kappa"
     """'kappa' (paper: interpolate by the object's state) or 'frame' (reference code: by frame index)."""
     huber_delta: float = 1.25
     """Delta of the Huber loss on rendered embeddings."""
@@ -230,7 +233,7 @@ class TrainConfig:
     """Linear learning-rate warm-up steps (K-Planes: 512)."""
     lr_final_ratio: float = 0.0
     """Learning rate at the last step relative to the peak (cosine decay)."""
-    mixed_precision: str = "auto"
+    mixed_precision: Literal["auto", "bf16", "fp16", "off"] = "auto"
     """'auto' (bf16 autocast on CUDA where supported, else fp16; off on CPU), or 'bf16' / 'fp16' (any device), 'off'."""
     eval_every: int = 500
     """Held-out PSNR every this many steps (0 = never)."""
@@ -291,52 +294,6 @@ class RunConfig:
         return dataclasses.asdict(self)
 
 
-def _build(cls: type, data: dict[str, Any], where: str) -> Any:
-    """Instantiate a dataclass from a dict, recursing into nested dataclasses; unknown keys are errors."""
-    if not isinstance(data, dict):
-        raise InputError(where, f"expected a mapping for {cls.__name__}, got {type(data).__name__}",
-                         "write the section as key: value pairs")
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    kwargs: dict[str, Any] = {}
-    for key, value in data.items():
-        if key not in fields:
-            raise InputError(where, f"unknown field {key!r} in {cls.__name__}",
-                             f"use one of {sorted(fields)}")
-        default = getattr(cls(), key)
-        if dataclasses.is_dataclass(default):
-            kwargs[key] = _build(type(default), value, f"{where}:{key}")
-        else:
-            kwargs[key] = _coerce(value, default, f"{where}:{key}")
-    return cls(**kwargs)
-
-
-def _coerce(value: Any, default: Any, where: str) -> Any:
-    """Give ``value`` the type of ``default`` (YAML reads 1e-3 as a string, ints where floats are meant)."""
-    try:
-        if isinstance(default, bool):
-            if isinstance(value, str):
-                if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                    raise ValueError(value)
-                return value.lower() in ("true", "1", "yes")
-            return bool(value)
-        if isinstance(default, int):
-            if isinstance(value, float) and not value.is_integer():
-                raise ValueError(value)
-            return int(value)
-        if isinstance(default, float):
-            return float(value)
-        if isinstance(default, str):
-            return str(value)
-        if isinstance(default, list):
-            if not isinstance(value, list):
-                raise ValueError(value)
-            return value
-    except (TypeError, ValueError) as exc:
-        raise InputError(where, f"value {value!r} is not a valid {type(default).__name__}",
-                         f"write a {type(default).__name__} like {default!r}") from exc
-    return value
-
-
 def preset_path(preset: str) -> Path:
     """A preset name (config/model/<name>.yaml) or a path to a YAML file."""
     p = Path(preset)
@@ -390,19 +347,27 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
 
     This is the one way a method's config is built: the workflow's ``livescene train --method m``,
     ``livescene compare`` and the Python API all get preset + ``config/model/methods/<m>.yaml``.
+    Each source is checked on its own against the field types first, so an error names the file (the
+    preset, the overlay) or the ``--set`` item that holds the bad value. Top-level fields given as
+    paths (``data=Path(...)``) are taken as their text.
     """
     path = preset_path(preset)
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise InputError(path, f"not valid YAML ({exc})", "repair the preset") from exc
-    if not isinstance(data, dict):
-        raise InputError(path, "top level is not a mapping", "write sections model: and train:")
+    data = read_yaml_mapping(path, "sections model:, train: and trust: (see config/model/cpu-demo.yaml)",
+                             error=InputError)
     data.setdefault("preset", path.stem)
-    parsed = [(text, *parse_override(text)) for text in overrides or []]
+    from_mapping(RunConfig, data, path=path)
+    parsed = []
+    for text in overrides or []:
+        keys, value = parse_override(text)
+        _check_override(text, keys, value)
+        parsed.append((text, keys, value))
+    top = {k: os.fspath(v) if isinstance(v, os.PathLike) else v for k, v in top.items() if v is not None}
+    from_mapping(RunConfig, top, path="load_config")
     method = top.get("method") or next((v for _, k, v in reversed(parsed) if k == ["method"]), data.get("method"))
     if method:  # the overlay sits between the preset and the explicit overrides, which win
-        _merge(data, method_overlay(str(method), path.stem))
+        overlay = method_overlay(str(method), path.stem)
+        from_mapping(RunConfig, overlay, path=METHOD_DIR / f"{method}.yaml", root=path.stem)
+        _merge(data, overlay)
     for text, keys, value in parsed:
         node = data
         for k in keys[:-1]:
@@ -410,12 +375,21 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
             if not isinstance(node, dict):
                 raise InputError("--set", f"{text!r}: {k} is not a section", "name a field inside a section")
         node[keys[-1]] = value
-    for k, v in top.items():
-        if v is not None:
-            data[k] = v
-    return _build(RunConfig, data, str(path))
+    data.update(top)
+    return from_mapping(RunConfig, data, path=path)
+
+
+def _check_override(text: str, keys: list[str], value: Any) -> None:
+    """Refuse an unknown key or a wrongly typed value of one ``--set`` item, naming the item."""
+    nested: Any = value
+    for k in reversed(keys):
+        nested = {k: nested}
+    try:
+        from_mapping(RunConfig, nested, path="--set")
+    except InputError as exc:
+        raise InputError("--set", f"{text!r}: {exc.problem}", exc.fix) from None
 
 
 def config_from_dict(data: dict[str, Any], where: str = "config.yaml") -> RunConfig:
     """Rebuild a RunConfig saved by ``RunConfig.to_dict`` (run folders, checkpoints)."""
-    return _build(RunConfig, data, where)
+    return from_mapping(RunConfig, data, path=where)

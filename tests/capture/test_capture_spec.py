@@ -1,0 +1,75 @@
+"""Capture specs are typed: every shipped spec loads unchanged, wrong types are refused with the key path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from stages.capture import CaptureSpecError, load_spec, spec_from_dict, spec_to_dict
+from stages.capture.spec import CaptureSpec, LightSpec, ObjectSpec, ScheduleSpec
+from stages.stability.tiny_scenes import capture_spec_data
+
+PRESETS = Path(__file__).resolve().parents[2] / "config" / "captures"
+SHIPPED = sorted(p.stem for p in PRESETS.glob("*.yaml"))
+
+
+def _assert_unchanged(raw: Any, loaded: Any, where: str) -> None:
+    """Every value the YAML gives is in the spec as written (an int in a float field as that float)."""
+    if isinstance(raw, dict):
+        for key, value in raw.items():
+            _assert_unchanged(value, loaded[key], f"{where}.{key}")
+    elif isinstance(raw, list):
+        assert isinstance(loaded, list) and len(loaded) == len(raw), where
+        for i, (a, b) in enumerate(zip(raw, loaded, strict=True)):
+            _assert_unchanged(a, b, f"{where}[{i}]")
+    else:
+        assert loaded == raw and (type(loaded) is type(raw) or type(loaded) is float), (where, raw, loaded)
+
+
+@pytest.mark.parametrize("preset", SHIPPED)
+def test_every_shipped_spec_loads_unchanged_and_round_trips(preset):
+    raw = yaml.safe_load((PRESETS / f"{preset}.yaml").read_text())
+    spec = load_spec(PRESETS / f"{preset}.yaml")
+    data = spec_to_dict(spec)
+    _assert_unchanged(raw, data, preset)
+    assert isinstance(spec.objects[0], ObjectSpec) and isinstance(spec.objects[0].schedule, ScheduleSpec)
+    assert all(isinstance(light, LightSpec) for light in spec.render.lights)
+    assert spec_from_dict(data, f"{preset}.yaml") == spec
+    assert spec_from_dict(yaml.safe_load(yaml.safe_dump(data)), f"{preset}.yaml") == spec  # truth/spec.yaml
+
+
+def test_the_specs_the_tests_and_the_stability_suite_use_load(small_spec):
+    spec = small_spec(n_frames=3, width=40, height=30)  # what test_capture_cli writes as its spec file
+    assert spec_from_dict(yaml.safe_load(yaml.safe_dump(spec_to_dict(spec))), "small.yaml") == spec
+    data = capture_spec_data("tiny", width=32, height=24, n_frames=6)  # the stability suite's tiny captures
+    spec = spec_from_dict(data, PRESETS / "tiny.yaml")
+    assert (spec.video.width, spec.video.n_frames, spec.render.shadows) == (32, 6, False)
+    assert spec_from_dict({"name": "bare"}) == CaptureSpec(name="bare")
+
+
+@pytest.mark.parametrize(("edit", "words"), [
+    (lambda d: d["objects"][0].update(limits=[0, "x"]),
+     ["spec.objects[0].limits[1] is 'x' (a string), expected a number"]),
+    (lambda d: d["video"].update(fps="10"), ["spec.video.fps is '10' (a string)", "without quotes"]),
+    (lambda d: d["video"].update(n_frames=12.5), ["spec.video.n_frames is 12.5", "expected an integer"]),
+    (lambda d: d["render"]["lights"][0].update(shadows="yes"), ["spec.render.lights[0].shadows is 'yes'"]),
+    (lambda d: d["objects"][0].pop("kind"), ["spec.objects[0] is missing required keys ['kind']"]),
+    (lambda d: d["objects"][1]["schedule"].update(speed=1), ["spec.objects[1].schedule has unknown keys ['speed']",
+                                                            "use only ['interpolation', 'keys']"]),
+    (lambda d: d.update(name=2024), ["spec.name is 2024 (an integer), expected a string", "in quotes: '2024'"]),
+    (lambda d: d.update(objects={"cabinet": {}}), ["spec.objects is", "expected a list of mappings of ObjectSpec"]),
+])
+def test_wrong_types_name_the_file_and_the_key(tmp_path, edit, words):
+    data = yaml.safe_load((PRESETS / "tiny.yaml").read_text())
+    edit(data)
+    path = tmp_path / "broken.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(CaptureSpecError) as info:
+        load_spec(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and "; fix: " in message
+    for word in words:
+        assert word in message, (word, message)
