@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from stages.scene import InputError, atomic_path
+from stages.scene.cli_errors import cli_errors
 
 SUBCOMMANDS = ("render", "dataset")
 
@@ -197,13 +198,10 @@ def _run_dataset(argv: list[str]) -> int:
     return 0
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     run = {"render": _run_render, "dataset": _run_dataset}.get(argv[0] if argv else "")
-    try:
-        if run is not None:
-            return run(argv[1:])
-        return _run_generate(argv)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if run is not None:
+        return run(argv[1:])
+    return _run_generate(argv)

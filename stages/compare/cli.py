@@ -15,7 +15,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from stages.scene import InputError, atomic_path, write_yaml
+from stages.scene import atomic_path, write_yaml
+from stages.scene.cli_errors import cli_errors
 
 from .method_comparison import (
     ALL_METHODS,
@@ -70,31 +71,28 @@ def _preset_parser() -> argparse.ArgumentParser:
     return p
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    try:
-        if argv and argv[0] == "params":
-            a = _params_parser().parse_args(argv[1:])
-            table = params_vs_objects(a.methods, range(1, a.max_objects + 1), a.scale)
-            with atomic_path(Path(a.out), suffix=".csv") as tmp:
-                table.to_csv(tmp, index=False)
-            print(table.pivot(index="objects", columns="method", values="total_params").to_string())
-            return 0
-        if argv and argv[0] == "preset":
-            a = _preset_parser().parse_args(argv[1:])
-            write_yaml(Path(a.out), method_preset(a.method, a.scale))
-            print(a.out)
-            return 0
-        args = build_parser().parse_args(argv)
-        cfg = CompareConfig(data=args.data, out=args.out, methods=list(args.methods), budget_s=args.budget_s,
-                            scale=args.scale, seed=args.seed, device=args.device, max_steps=args.max_steps,
-                            overrides=list(args.overrides), eval_frames=args.eval_frames,
-                            eval_scale=args.eval_scale,
-                            replay=args.replay or "", isolate=not args.in_process)
-        table = compare_methods(cfg)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if argv and argv[0] == "params":
+        a = _params_parser().parse_args(argv[1:])
+        table = params_vs_objects(a.methods, range(1, a.max_objects + 1), a.scale)
+        with atomic_path(Path(a.out), suffix=".csv") as tmp:
+            table.to_csv(tmp, index=False)
+        print(table.pivot(index="objects", columns="method", values="total_params").to_string())
+        return 0
+    if argv and argv[0] == "preset":
+        a = _preset_parser().parse_args(argv[1:])
+        write_yaml(Path(a.out), method_preset(a.method, a.scale))
+        print(a.out)
+        return 0
+    args = build_parser().parse_args(argv)
+    cfg = CompareConfig(data=args.data, out=args.out, methods=list(args.methods), budget_s=args.budget_s,
+                        scale=args.scale, seed=args.seed, device=args.device, max_steps=args.max_steps,
+                        overrides=list(args.overrides), eval_frames=args.eval_frames,
+                        eval_scale=args.eval_scale,
+                        replay=args.replay or "", isolate=not args.in_process)
+    table = compare_methods(cfg)
     print(format_table(table))
     failed = table["status"].astype(str).str.startswith("failed").any()
     return 1 if failed else 0

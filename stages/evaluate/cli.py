@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
 from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 
 def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
@@ -46,30 +46,23 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     return p
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return _evaluate(args)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return _evaluate(build_parser().parse_args(argv))
 
 
 def _evaluate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from stages.language.grounding import Grounder
-    from stages.language.model_run import load_model_run, run_dataset_root
     from stages.language.vocabulary import ObjectVocabulary
+    from stages.model.run import dataset_of_run, open_run
     from stages.scene import read_scene
 
     from .evaluation import EvaluateConfig, evaluate_run
     from .truth_source import TruthSource
 
-    data = args.data or run_dataset_root(args.run)
-    if data is None:
-        raise InputError(Path(args.run) / "config.yaml", "does not say which dataset the run was trained on",
-                         "pass --data DS")
+    data = dataset_of_run(args.run, args.data)
     try:
         levels = tuple(float(v) for v in args.levels.split(",") if v.strip())
     except ValueError as exc:
@@ -91,7 +84,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                          novelty_min=args.novelty_min, grounding_threshold=args.grounding_threshold,
                          save_renders=not args.no_renders, render_scale=args.scale,
                          locality_views=args.locality_views)
-    run = load_model_run(args.run, args.device)
+    run = open_run(args.run, args.device)
     extra = {"run": str(args.run), "device": args.device,
              "encoder": getattr(grounder.encoder, "name", None) if grounder else None}
     metrics = evaluate_run(run, ds, args.out, truth, grounder, cfg, extra)

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
-from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .exporter import ExportOptions, export_run
 from .mesh_io import FORMATS
@@ -43,6 +42,7 @@ def build_parser(prog: str = "livescene export") -> argparse.ArgumentParser:
     return p
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     import torch  # after argument parsing: --help stays fast
@@ -52,18 +52,14 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.threads > 0:
         torch.set_num_threads(args.threads)
-    try:
-        options = ExportOptions(fmt=args.format, objects=args.objects, views=args.views, scale=args.scale,
-                                resolution=args.resolution, prob_threshold=args.prob_threshold)
-        options.check()
-        run = load_run(args.run, device=args.device)
-        combos = [parse_state_string(s, run.objects) for s in args.states]
-        dataset = read_run_dataset(args.run, run.config.data, args.data)
-        doc = export_run(run, dataset, combos, args.out, options, progress=not args.no_progress,
-                         run_info={"run": str(args.run), "method": run.method, "step": run.step})
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    options = ExportOptions(fmt=args.format, objects=args.objects, views=args.views, scale=args.scale,
+                            resolution=args.resolution, prob_threshold=args.prob_threshold)
+    options.check()
+    run = load_run(args.run, device=args.device)
+    combos = [parse_state_string(s, run.objects) for s in args.states]
+    dataset = read_run_dataset(args.run, run.config.data, args.data)
+    doc = export_run(run, dataset, combos, args.out, options, progress=not args.no_progress,
+                     run_info={"run": str(args.run), "method": run.method, "step": run.step})
     summary = {"out": args.out, "total_seconds": doc["total_seconds"],
                "exports": [{"states": r["states"], "scene_vertices": r["files"]["scene_mesh"]["vertices"],
                             "seconds": r["timings_s"]["total"]} for r in doc["exports"]]}

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .config import FramesConfig
 
@@ -37,30 +37,27 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        if args.count is not None and args.count < 1:
-            raise InputError(Path("--count"), f"{args.count} frames requested", "give --count >= 1")
-        if args.stride is not None and args.stride < 1:
-            raise InputError(Path("--stride"), f"stride {args.stride}", "give --stride >= 1")
-        if any(f < 2 for f in args.downscale):
-            raise InputError(Path("--downscale"), f"factors {args.downscale}", "give integer factors >= 2, e.g. 2 4")
-        if not 0 <= args.max_dropped <= 1:
-            raise InputError(Path("--max-dropped"), f"{args.max_dropped} is not a share between 0 and 1",
-                             "give --max-dropped between 0 (refuse any damaged frame) and 1")
-        if args.fps is not None and not args.fps > 0:
-            raise InputError(Path("--fps"), f"{args.fps} frames per second", "give a positive frame rate")
-        from .extraction import extract_frames
+    if args.count is not None and args.count < 1:
+        raise InputError(Path("--count"), f"{args.count} frames requested", "give --count >= 1")
+    if args.stride is not None and args.stride < 1:
+        raise InputError(Path("--stride"), f"stride {args.stride}", "give --stride >= 1")
+    if any(f < 2 for f in args.downscale):
+        raise InputError(Path("--downscale"), f"factors {args.downscale}", "give integer factors >= 2, e.g. 2 4")
+    if not 0 <= args.max_dropped <= 1:
+        raise InputError(Path("--max-dropped"), f"{args.max_dropped} is not a share between 0 and 1",
+                         "give --max-dropped between 0 (refuse any damaged frame) and 1")
+    if args.fps is not None and not args.fps > 0:
+        raise InputError(Path("--fps"), f"{args.fps} frames per second", "give a positive frame rate")
+    from .extraction import extract_frames
 
-        cfg = FramesConfig(source=args.video, out_dir=args.out, count=args.count, stride=args.stride,
-                           downscale=tuple(sorted(set(args.downscale))), fps=args.fps,
-                           accept_truncated=args.accept_truncated, max_dropped=args.max_dropped,
-                           progress=not args.no_progress)
-        s = extract_frames(cfg)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    cfg = FramesConfig(source=args.video, out_dir=args.out, count=args.count, stride=args.stride,
+                       downscale=tuple(sorted(set(args.downscale))), fps=args.fps,
+                       accept_truncated=args.accept_truncated, max_dropped=args.max_dropped,
+                       progress=not args.no_progress)
+    s = extract_frames(cfg)
     dropped = f", dropped {s['dropped_frame_count']} damaged (frames_dropped.csv)" if s["dropped_frame_count"] else ""
     print(f"kept {s['n_frames']} of {s['decoded_frame_count']} frames ({s['selection']['rule']}){dropped}, "
           f"{s['width']}x{s['height']}, {s['timings']['total']:.1f} s -> {args.out}")

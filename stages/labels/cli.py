@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from stages.scene.errors import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .ingest import LabelsConfig, ingest_labels
 
@@ -30,15 +29,12 @@ def build_parser(prog: str = "livescene labels") -> argparse.ArgumentParser:
     return p
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     config = LabelsConfig(input=args.input, frames=args.frames, out=args.out, format=args.format,
                           mapping=args.mapping, progress=not args.no_progress, missing_masks=args.missing_masks)
-    try:
-        summary = ingest_labels(config)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    summary = ingest_labels(config)
     print(f"{args.out}: {summary['n_labelled']}/{summary['n_frames']} frames labelled ({summary['format']}), "
           f"objects {summary['objects']}, {len(summary['frames_without_masks'])} without masks, "
           f"{len(summary['unreliable_frames'])} unreliable (object under H*W/300 pixels)")

@@ -16,7 +16,6 @@ from .encoder import (
     normalize_rows,
 )
 from .grounding import DEFAULT_THRESHOLD, Grounder
-from .model_run import load_model_run, run_dataset_root
 from .object_resolution import (
     AmbiguousObjectError,
     CommandError,
@@ -59,12 +58,10 @@ __all__ = [
     "default_cache_dir",
     "lerf_relevancy",
     "load_encoder",
-    "load_model_run",
     "masked_object_crop",
     "normalize_phrase",
     "normalize_rows",
     "parse_command",
-    "run_dataset_root",
     "softmax",
     "split_clauses",
 ]

@@ -118,18 +118,15 @@ def _relevancy(args: argparse.Namespace) -> int:
     import cv2
     import numpy as np
 
+    from stages.model.run import dataset_of_run, open_run
     from stages.scene import atomic_path, read_scene
 
     from .grounding import Grounder
-    from .model_run import load_model_run, run_dataset_root
     from .vocabulary import ObjectVocabulary
 
-    data = args.data or run_dataset_root(args.run)
-    if data is None:
-        raise InputError(Path(args.run) / "config.yaml", "does not say which dataset the run was trained on",
-                         "pass --data DS")
+    data = dataset_of_run(args.run, args.data)
     ds = read_scene(data)
-    run = load_model_run(args.run, args.device)
+    run = open_run(args.run, args.device)
     frames = ds.frames_in("test") or ds.frames
     frame = next((f for f in ds.frames if f.frame_id == args.frame), None) if args.frame else frames[0]
     if frame is None:

@@ -65,10 +65,13 @@ def main(argv: list[str] | None = None) -> int:
 
 def _control(args: argparse.Namespace) -> int:
     from .commands import CommandParser
-    from .model_run import run_dataset_root
     from .vocabulary import ObjectVocabulary
 
-    data = args.data or (run_dataset_root(args.run) if args.run else None)
+    data = args.data
+    if args.run and not data:
+        from stages.model.run import dataset_of_run  # imported on use: commands without --run need no torch
+
+        data = dataset_of_run(args.run)
     if args.objects:
         prompts = {}
         if args.prompts:
@@ -90,9 +93,6 @@ def _control(args: argparse.Namespace) -> int:
     if args.run:
         from stages.scene import read_scene
 
-        if data is None:
-            raise InputError(Path(args.run) / "config.yaml", "does not say which dataset the run was trained on",
-                             "pass --data DS")
         ds = read_scene(data)
         frames = ds.frames_in("test") or ds.frames
         frame = next((f for f in ds.frames if f.frame_id == args.frame), None) if args.frame else frames[0]
@@ -112,11 +112,10 @@ def _control(args: argparse.Namespace) -> int:
         import cv2
         import numpy as np
 
+        from stages.model.run import open_run
         from stages.scene import atomic_path
 
-        from .model_run import load_model_run
-
-        run = load_model_run(args.run, args.device)
+        run = open_run(args.run, args.device)
         out = run.render(ds.camera_of(frame), frame.c2w, result.states, frame_index=ds.frames.index(frame))
         path = Path(args.out or "control.png")
         rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)

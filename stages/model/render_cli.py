@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -14,6 +13,7 @@ import numpy as np
 import yaml
 
 from stages.scene import Camera, InputError, atomic_dir, read_scene
+from stages.scene.cli_errors import cli_errors
 
 from .camera_path import CameraPath, best_view_of, orbit_path, read_camera_path, states_sweep_path
 from .path_video import CODECS, encode_video, frames_dir_for, render_frames
@@ -140,23 +140,15 @@ def _render_video(args: argparse.Namespace) -> int:
 
     if args.threads > 0:
         torch.set_num_threads(args.threads)
-    try:
-        run = load_run(args.run, device=args.device)
-        cp = _video_path(args, run)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    run = load_run(args.run, device=args.device)
+    cp = _video_path(args, run)
     model = Path(args.run) / "model.pt"
     run_id = {"run": str(Path(args.run).resolve()), "step": run.step, "model_bytes": model.stat().st_size,
               "model_mtime_ns": model.stat().st_mtime_ns}
     frames_dir = Path(args.frames_dir) if args.frames_dir else frames_dir_for(args.out)
     stats = render_frames(run, cp, frames_dir, run_id, progress=not args.no_progress)
     t = time.perf_counter()
-    try:
-        size = encode_video(frames_dir, len(cp.frames), cp.fps, args.out, args.codec)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    size = encode_video(frames_dir, len(cp.frames), cp.fps, args.out, args.codec)
     stats.update({"out": str(args.out), "frames_dir": str(frames_dir), "width": cp.width, "height": cp.height,
                   "video_fps": cp.fps, "seconds": cp.seconds, "encode_seconds": round(time.perf_counter() - t, 3),
                   "bytes": size, "source": cp.source})
@@ -164,35 +156,32 @@ def _render_video(args: argparse.Namespace) -> int:
     return 0
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.camera_path or args.orbit or args.states_sweep:
         return _render_video(args)
-    try:
-        run = load_run(args.run, device=args.device)
-        frame_index = None
-        if args.pose:
-            spec, _, fid = args.pose.rpartition(":")
-            if not spec or not fid:
-                raise InputError("--pose", f"{args.pose!r} is not PATH:FRAME_ID", "write e.g. DS/transforms.json:00012")
-            root = Path(spec).parent if Path(spec).name == "transforms.json" else Path(spec)
-            ds = read_scene(root)
-            frame = next((f for f in ds.frames if f.frame_id == fid), None)
-            if frame is None:
-                raise InputError(root / "transforms.json", f"no frame with id {fid!r}",
-                                 "pick a frame id of the dataset")
-            camera, c2w = ds.camera_of(frame), frame.c2w
-            if [f.frame_id for f in ds.frames] == run.frame_ids:
-                frame_index = ds.frames.index(frame)
-        else:
-            c2w = _parse_matrix(args.pose_matrix)
-            data = args.data or run.config.data
-            camera = read_scene(data, validate=False).camera
-        out = run.render(camera, c2w, _parse_states(args.state) or None, frame_index=frame_index)
-        state = run.state_vector(_parse_states(args.state) or None, frame_index)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    run = load_run(args.run, device=args.device)
+    frame_index = None
+    if args.pose:
+        spec, _, fid = args.pose.rpartition(":")
+        if not spec or not fid:
+            raise InputError("--pose", f"{args.pose!r} is not PATH:FRAME_ID", "write e.g. DS/transforms.json:00012")
+        root = Path(spec).parent if Path(spec).name == "transforms.json" else Path(spec)
+        ds = read_scene(root)
+        frame = next((f for f in ds.frames if f.frame_id == fid), None)
+        if frame is None:
+            raise InputError(root / "transforms.json", f"no frame with id {fid!r}",
+                             "pick a frame id of the dataset")
+        camera, c2w = ds.camera_of(frame), frame.c2w
+        if [f.frame_id for f in ds.frames] == run.frame_ids:
+            frame_index = ds.frames.index(frame)
+    else:
+        c2w = _parse_matrix(args.pose_matrix)
+        data = args.data or run.config.data
+        camera = read_scene(data, validate=False).camera
+    out = run.render(camera, c2w, _parse_states(args.state) or None, frame_index=frame_index)
+    state = run.state_vector(_parse_states(args.state) or None, frame_index)
     with atomic_dir(args.out) as tmp:
         _write_png(tmp / "rgb.png", out["rgb"])
         depth = out["depth"]

@@ -6,6 +6,9 @@ arrays: ``rgb`` [H, W, 3], ``depth`` [H, W] (distance along the ray, dataset
 units), ``accumulation`` [H, W], ``probs`` [H, W, alpha + 1] (softmax of the
 rendered final-level logits, background last) and ``language`` [H, W, D] when
 the run was trained with language targets.
+
+``open_run`` and ``dataset_of_run`` are how the commands that take ``--run``
+(language, control, evaluate, view) open a run and find its dataset.
 """
 
 from __future__ import annotations
@@ -18,9 +21,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from stages.scene import Camera, InputError, generate_rays
+from stages.scene import Camera, InputError, generate_rays, read_yaml_mapping
 
-from .config import config_from_dict
+from .config import RunConfig, config_from_dict
 from .methods import SceneInfo, build_model
 from .rays import RayBundle
 from .scene_normalization import SceneNormalization, aabb_near_far
@@ -170,3 +173,51 @@ def load_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
                          f"stage (this one reads format {MODEL_FORMAT})",
                          "retrain the run (`livescene train ... --out NEW`), or load it with the version that wrote it")
     return LoadedRun(run_dir, payload, device)
+
+
+def _run_folder(run_dir: str | Path) -> Path:
+    """``run_dir`` as a Path, or an error saying the folder itself is missing (not only its model.pt)."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise InputError(run_dir, "run folder not found", "train one with `livescene train --data DS --out RUN`")
+    return run_dir
+
+
+def open_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
+    """``load_run`` for a run folder named on the command line: a folder that is not there is named as such."""
+    return load_run(_run_folder(run_dir), device=device)
+
+
+def run_config(run_dir: str | Path) -> RunConfig | None:
+    """The RunConfig of the run's config.yaml (written first by ``livescene train``); None when there is none."""
+    path = Path(run_dir) / "config.yaml"
+    if not path.is_file():
+        return None
+    return config_from_dict(read_yaml_mapping(path, "the run's settings, as `livescene train` writes them",
+                                              error=InputError), str(path))
+
+
+def run_dataset_root(run_dir: str | Path) -> Path | None:
+    """The dataset the run was trained on, ``RunConfig.data`` as written (None when the run does not say)."""
+    config = run_config(run_dir)
+    return Path(config.data) if config is not None and config.data else None
+
+
+def dataset_of_run(run_dir: str | Path, data: str | Path | None = None) -> Path:
+    """The dataset to open with a run: ``data`` (--data) when given, else the run's own.
+
+    ``RunConfig.data`` is the path as training was given it, so it holds from the folder training ran in;
+    a run opened from elsewhere, or whose dataset moved, gets an error naming its config.yaml and the fix.
+    """
+    if data:
+        return Path(data)
+    run_dir = _run_folder(run_dir)
+    path = run_dir / "config.yaml"
+    found = run_dataset_root(run_dir)
+    if found is None:
+        raise InputError(path, "does not say which dataset the run was trained on", "pass --data DS")
+    if not found.is_dir():
+        raise InputError(path, f"names the dataset {found}, which is not there from {Path.cwd()}",
+                         "pass --data DS (the dataset the run was trained on), or start from the folder the run "
+                         "was trained in")
+    return found

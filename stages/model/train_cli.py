@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from stages.scene import InputError
+from stages.scene.cli_errors import ErrorExit, cli_errors
 
 from .config import load_config
 from .trainer import Trainer, TrainingDiverged
@@ -31,6 +31,7 @@ def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
     return p
 
 
+@cli_errors(KeyError, ErrorExit(TrainingDiverged, 1, "training diverged: "))  # KeyError: an unknown --method
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     overrides = list(args.overrides)
@@ -40,20 +41,10 @@ def main(argv: list[str] | None = None) -> int:
         overrides.append(f"train.max_seconds={args.max_seconds}")
     if args.max_steps is not None:
         overrides.append(f"train.max_steps={args.max_steps}")
-    try:
-        config = load_config(args.preset, overrides, method=args.method, seed=args.seed, data=args.data,
-                             language_targets=args.language_targets)
-        trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress)
-        summary = trainer.train()
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyError as exc:  # unknown method
-        print(f"error: {exc.args[0]}", file=sys.stderr)
-        return 2
-    except TrainingDiverged as exc:
-        print(f"error: training diverged: {exc}", file=sys.stderr)
-        return 1
+    config = load_config(args.preset, overrides, method=args.method, seed=args.seed, data=args.data,
+                         language_targets=args.language_targets)
+    trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress)
+    summary = trainer.train()
     if summary.get("status") == "sigterm":
         print(f"stopped by SIGTERM at step {summary['step']}; checkpoint saved, resume with --resume",
               file=sys.stderr)

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from stages.scene import InputError, write_json
+from stages.scene.cli_errors import cli_errors
 
 from .config import PosesConfig
 
@@ -150,14 +151,11 @@ def _import(argv: list[str]) -> int:
     return 0
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    try:
-        if argv and argv[0] == "import":
-            return _import(argv[1:])
-        if argv and argv[0] == "compare":
-            return _compare(argv[1:])
-        return _estimate(argv)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if argv and argv[0] == "import":
+        return _import(argv[1:])
+    if argv and argv[0] == "compare":
+        return _compare(argv[1:])
+    return _estimate(argv)

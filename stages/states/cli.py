@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
 
-from stages.scene.errors import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .errors import StateError
 from .interpolation import METHODS
@@ -61,17 +60,14 @@ def parse_ranges(items: list[str]) -> dict[str, tuple[float, float]]:
     return out
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        method, per_object = parse_methods(args.method)
-        config = StatesConfig(key_frames=args.key_frames, frames=args.frames, out=args.out, format=args.format,
-                              method=method, object_methods=per_object, ranges=parse_ranges(args.range),
-                              mapping=args.mapping, allow_missing_frames=args.allow_missing_frames)
-        summary = compute_states(config)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    method, per_object = parse_methods(args.method)
+    config = StatesConfig(key_frames=args.key_frames, frames=args.frames, out=args.out, format=args.format,
+                          method=method, object_methods=per_object, ranges=parse_ranges(args.range),
+                          mapping=args.mapping, allow_missing_frames=args.allow_missing_frames)
+    summary = compute_states(config)
     for name in summary["objects"]:
         loo = summary["leave_one_out"][name]
         errs = ", ".join(f"{m} {v['mae']:.3f}" for m, v in loo.items() if v["mae"] is not None) or "n/a"

@@ -169,7 +169,7 @@ def compute_states(config: StatesConfig) -> dict:
 
 
 def read_states_csv(path: str | Path) -> pd.DataFrame:
-    """states.csv as written by :func:`compute_states` (checked for the columns assemble needs)."""
+    """states.csv as written by :func:`compute_states` (checked for the columns `livescene dataset assemble` needs)."""
     path = Path(path)
     if path.is_dir():
         path = path / "states.csv"

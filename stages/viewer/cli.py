@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from stages.language.cli import add_encoder_arguments, encoder_from_args
 from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .resolution import Resolution
 from .viser_dependency import require_viser
@@ -58,29 +58,13 @@ def build_parser(prog: str = "livescene view") -> argparse.ArgumentParser:
     return p
 
 
-def _dataset_root(args: argparse.Namespace) -> Path:
-    from stages.language.model_run import run_dataset_root
-
-    if args.data:
-        return Path(args.data)
-    found = run_dataset_root(args.run)
-    if found is None:
-        raise InputError(Path(args.run) / "config.yaml", "does not say which dataset the run was trained on",
-                         "pass --data DS")
-    if not found.is_dir():
-        raise InputError(Path(args.run) / "config.yaml", f"names the dataset {found}, which is not there from "
-                         f"{Path.cwd()}", "pass --data DS (the dataset the run was trained on), or start from the "
-                                          "folder the run was trained in")
-    return found
-
-
 def build_viewer(args: argparse.Namespace) -> Any:
     """Load the run and its dataset and start the viewer (``LiveViewer``) as ``args`` say."""
     import numpy as np
     import torch
 
-    from stages.language.model_run import load_model_run
     from stages.language.vocabulary import ObjectVocabulary
+    from stages.model.run import dataset_of_run, open_run
     from stages.scene import generate_rays, read_scene
 
     from .language_controls import LanguageControls
@@ -96,8 +80,8 @@ def build_viewer(args: argparse.Namespace) -> Any:
     for flag, value in (("--frame-budget", args.frame_budget), ("--settle", args.settle)):
         if not value > 0:
             raise InputError(flag, f"{value} seconds", "give a positive number of seconds")
-    run = load_model_run(args.run, args.device)
-    data = _dataset_root(args)
+    run = open_run(args.run, args.device)
+    data = dataset_of_run(args.run, args.data)
     ds = read_scene(data)
     if args.resolution:
         resolution = Resolution.parse(args.resolution)
@@ -120,17 +104,14 @@ def build_viewer(args: argparse.Namespace) -> Any:
     return LiveViewer(run, ds, language, options)
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # Must be set before torch loads OpenMP: with the default (spinning) wait policy two torch threads on a
     # busy 2-core machine burn ~3x the CPU time per render (docs/viewer.md); a viewer always shares its cores.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    try:
-        require_viser()
-        viewer = build_viewer(args)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    require_viser()
+    viewer = build_viewer(args)
     print(f"livescene view: {viewer.url}  ({len(viewer.objects)} objects: {', '.join(viewer.objects)}; "
           f"full resolution {viewer.options.full_pixels} pixels; Ctrl-C stops)", flush=True)
     try:

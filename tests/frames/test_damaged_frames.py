@@ -118,9 +118,9 @@ def test_window_falls_back_to_a_whole_frame(tmp_path: Path, capsys: pytest.Captu
 
 
 def test_downstream_readers_see_only_whole_frames(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from stages.dataset.assemble import list_images
     from stages.labels.frame_set import read_frame_set
     from stages.poses.frame_list import read_frame_list
-    from stages.scene.assemble import list_images
     from stages.states.frame_table import read_frame_table
 
     out = tmp_path / "frames"

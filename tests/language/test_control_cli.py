@@ -6,10 +6,13 @@ import json
 
 import cv2
 import numpy as np
+import pytest
+import yaml
 
 from stages.language import cli as language_cli
 from stages.language import control_cli
-from stages.language import model_run as model_run_module
+from stages.model import RunConfig
+from stages.model import run as model_run_module
 
 
 class _FakeRun:
@@ -49,7 +52,7 @@ def test_control_errors_exit_2_with_candidates(capsys):
 
 def test_control_with_a_run_renders_the_result(tiny_dataset, tmp_path, monkeypatch, capsys, encoder):
     fake = _FakeRun(tiny_dataset.objects)
-    monkeypatch.setattr(model_run_module, "load_model_run", lambda run, device="cpu": fake)
+    monkeypatch.setattr(model_run_module, "open_run", lambda run, device="cpu": fake)
     monkeypatch.setattr(control_cli, "encoder_from_args", lambda args: encoder)
     (tmp_path / "run").mkdir()
     out_png = tmp_path / "result.png"
@@ -70,7 +73,7 @@ def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsy
     assert out["resolved"] == {"object": "object0", "method": "exact", "score": 1.0}
     assert set(out["embedding"]) == set(tiny_dataset.objects)
 
-    monkeypatch.setattr(model_run_module, "load_model_run", lambda run, device="cpu": _FakeRun(tiny_dataset.objects))
+    monkeypatch.setattr(model_run_module, "open_run", lambda run, device="cpu": _FakeRun(tiny_dataset.objects))
     (tmp_path / "run").mkdir()
     png = tmp_path / "map.png"
     assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
@@ -82,3 +85,41 @@ def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsy
     assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
                               "--out", str(png), "--source", "language", "thing zero"]) == 2
     assert "renders no language embedding" in capsys.readouterr().err
+
+
+def _run_folder(root, data):
+    """A run folder whose config.yaml is a RunConfig (as `livescene train` writes it) naming ``data``."""
+    run = root / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text(yaml.safe_dump(RunConfig(data=str(data)).to_dict()))
+    return run
+
+
+def test_control_finds_the_runs_dataset_in_its_config(tiny_dataset, tmp_path, monkeypatch, capsys):
+    fake = _FakeRun(tiny_dataset.objects)
+    monkeypatch.setattr(model_run_module, "open_run", lambda run, device="cpu": fake)
+    run = _run_folder(tmp_path, tiny_dataset.root)
+    assert model_run_module.run_dataset_root(run) == tiny_dataset.root  # RunConfig.data, as written
+    assert control_cli.main(["--run", str(run), "--no-encoder", "--out", str(tmp_path / "c.png"),
+                             "open object1"]) == 0
+    assert json.loads(capsys.readouterr().out)["states"]["object1"] == 1.0 and fake.calls
+
+
+@pytest.mark.parametrize("cli", ["control", "relevancy"])
+def test_a_run_whose_dataset_moved_or_is_unnamed_is_refused_with_the_fix(tmp_path, capsys, cli):
+    def call(run):
+        if cli == "control":
+            return control_cli.main(["--run", str(run), "--no-encoder", "open all"])
+        return language_cli.main(["relevancy", "--run", str(run), "--out", str(tmp_path / "m.png"), "thing"])
+
+    run = _run_folder(tmp_path, tmp_path / "moved-away")
+    assert call(run) == 2
+    err = capsys.readouterr().err
+    assert f"{run / 'config.yaml'}: names the dataset {tmp_path / 'moved-away'}, which is not there" in err
+    assert "fix: pass --data DS (the dataset the run was trained on)" in err
+    (run / "config.yaml").write_text(yaml.safe_dump(RunConfig().to_dict()))  # data: ""
+    assert call(run) == 2
+    assert "config.yaml: does not say which dataset the run was trained on; fix: pass --data DS" in \
+        capsys.readouterr().err
+    assert call(tmp_path / "no-run") == 2
+    assert "no-run: run folder not found; fix: train one with `livescene train" in capsys.readouterr().err

@@ -151,6 +151,7 @@ def test_imported_colmap_model_replaces_sfm_and_prompts_reach_assembly(workflow_
     assert f"--model {model} --frames results/shots/frames --out results/shots/poses" in jobs["poses_import"][0]
     assert {"frames", "states", "assemble", "pose_compare", "language_targets"} <= set(jobs)
     assert f"--prompts {tmp_path / 'prompts.yaml'}" in jobs["assemble"][0]
+    assert " dataset assemble --frames results/shots/frames " in jobs["assemble"][0]  # the dataset stage's command
     assert all(f"--truth {truth}" in t for t in jobs["evaluate"])
 
 

@@ -1,5 +1,5 @@
-# Scene dataset: assemble frames, poses, labels and states into the dataset contract, or check a
-# ready dataset against it.
+# Scene dataset: assemble frames, poses, labels and states into the dataset contract (the dataset
+# stage, `livescene dataset assemble`), or check a ready dataset against it (`livescene scene`).
 
 
 rule assemble:
@@ -21,7 +21,7 @@ rule assemble:
     conda:
         ENV
     shell:
-        "{params.cli} scene assemble --frames {input.frames} --poses {input.poses} {params.args} --out {output}"
+        "{params.cli} dataset assemble --frames {input.frames} --poses {input.poses} {params.args} --out {output}"
         " --no-progress > {log} 2>&1"
 
 

@@ -1,4 +1,4 @@
-"""``livescene scene assemble``: frames + poses + labels + states -> one validated scene dataset.
+"""``livescene dataset assemble``: frames + poses + labels + states -> one validated scene dataset.
 
 Only frames that have a pose are kept (COLMAP may fail to register some); the
 dropped ones are listed in scene.json. ``--poses`` may be a POSES folder of
@@ -6,6 +6,10 @@ dropped ones are listed in scene.json. ``--poses`` may be a POSES folder of
 transforms.json, such as the truth poses of a synthetic capture (its scene.json,
 when next to it, gives the scene box; truth states in it are ignored: states
 come from STATES).
+
+It joins the outputs of the frames, poses, labels and states stages, so it is a
+stage of its own after them, not part of the shared ``stages.scene`` contract
+(docs/data-contract.md, "Stage order").
 """
 
 from __future__ import annotations
@@ -22,15 +26,23 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from .atomic_io import atomic_dir
-from .camera import Camera
-from .dataset import Frame, SceneDataset, read_scene, write_scene
-from .errors import SceneError
-from .keyframes import frame_id_of, read_key_frames
-from .masks import check_mask_array, mask_path
-from .splits import SplitMethod, make_split
-from .transforms import camera_from_dict, load_json, parse_pose
-from .yaml_io import read_yaml_mapping
+from stages.scene import (
+    Camera,
+    Frame,
+    SceneDataset,
+    SceneError,
+    atomic_dir,
+    frame_id_of,
+    make_split,
+    read_key_frames,
+    read_scene,
+    read_yaml_mapping,
+    write_scene,
+)
+from stages.scene.masks import check_mask_array, mask_path
+from stages.scene.splits import SplitMethod
+from stages.scene.transforms import camera_from_dict, load_json, parse_pose
+from stages.states import read_states_csv
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 
@@ -41,7 +53,7 @@ class AssembleError(SceneError):
 
 @dataclass
 class AssembleConfig:
-    """The stage folders `livescene scene assemble` joins, and where it writes."""
+    """The stage folders `livescene dataset assemble` joins, and where it writes."""
 
     frames: Path
     """FRAMES folder (images/ + frames.csv)."""
@@ -135,8 +147,6 @@ def read_labels(labels: Path) -> tuple[list[int], list[str], dict[str, Any]]:
 
 def read_states(states: Path) -> tuple[dict[str, dict[str, float]], list[str], Path]:
     """(frame id -> {object: value}, object names in first-seen order, states.csv path)."""
-    from stages.states import read_states_csv  # stage package; imported late so stages.scene stays light
-
     spath = states / "states.csv" if states.is_dir() else states
     table = read_states_csv(spath)
     out: dict[str, dict[str, float]] = {}

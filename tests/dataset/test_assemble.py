@@ -1,4 +1,4 @@
-"""`livescene scene assemble`: frames + poses + labels + states -> one validated scene dataset, and back."""
+"""`livescene dataset assemble`: frames + poses + labels + states -> one validated scene dataset, and back."""
 
 from __future__ import annotations
 
@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 import yaml
 
+from stages.cli import main as livescene_main
+from stages.dataset import AssembleConfig, assemble_scene
+from stages.dataset.cli import main as dataset_main
 from stages.labels import LabelsConfig, ingest_labels
 from stages.scene import Camera, SceneError, look_at, read_scene
-from stages.scene.assemble import AssembleConfig, assemble_scene
 from stages.scene.cli import main as scene_main
 from stages.scene.transforms import camera_to_dict
 from stages.states import StatesConfig, compute_states
@@ -70,9 +72,9 @@ def make_stage_outputs(root: Path, registered: list[int] | None = None) -> dict[
 def test_round_trip(tmp_path):
     paths = make_stage_outputs(tmp_path, registered=[0, 1, 2, 4, 5])  # frame 3 (source 9) not registered
     out = tmp_path / "ds"
-    code = scene_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
-                       "--labels", str(paths["labels"]), "--states", str(paths["states"]),
-                       "--prompts", str(paths["prompts"]), "--out", str(out), "--no-progress"])
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--labels", str(paths["labels"]), "--states", str(paths["states"]),
+                         "--prompts", str(paths["prompts"]), "--out", str(out), "--no-progress"])
     assert code == 0
     ds = read_scene(out, deep=True)
     assert ds.objects == NAMES and ds.object_ids == [1, 2]
@@ -125,8 +127,8 @@ def test_poses_of_other_frames_are_refused(tmp_path, capsys):
     for fr in data["frames"]:
         fr["file_path"] = fr["file_path"].replace("frame_", "other_9")
     (paths["poses"] / "transforms.json").write_text(json.dumps(data))
-    code = scene_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
-                       "--out", str(tmp_path / "ds")])
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--out", str(tmp_path / "ds")])
     err = capsys.readouterr().err
     assert code == 2 and "transforms.json: no pose matches an image of" in err
 
@@ -139,3 +141,16 @@ def test_image_size_that_is_no_integer_factor_of_the_poses(tmp_path):
     with pytest.raises(SceneError, match=r"poses are for 24x18 images but the frames are 16x12"):
         assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds",
                                       progress=False))
+
+
+def test_old_scene_assemble_name_runs_the_dataset_stage(tmp_path, capsys):
+    """`livescene scene assemble` stays an alias (docs/data-contract.md, "Scene dataset"); the scene CLI itself,
+    which may not import the dataset stage, points to the new command."""
+    paths = make_stage_outputs(tmp_path)
+    out = tmp_path / "ds"
+    code = livescene_main(["scene", "assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                           "--states", str(paths["states"]), "--out", str(out), "--no-progress"])
+    assert code == 0 and "scene dataset, 6 frames" in capsys.readouterr().out
+    assert read_scene(out).objects == NAMES
+    assert scene_main(["assemble", "--frames", str(paths["frames"])]) == 2
+    assert "run `livescene dataset assemble`" in capsys.readouterr().err

@@ -1,0 +1,73 @@
+"""One way every stage CLI reports the project's own errors: a message on stderr, an exit status, no traceback.
+
+An ``InputError`` (stages/scene/errors.py) already says which file is wrong and how to fix it, so a
+traceback would only bury that line; the workflow's logs and a person at a terminal both read
+``error: <file>: <problem>; fix: <fix>`` and exit status 2. Anything else is a bug or a crash and keeps
+its traceback: the wrapper never catches it.
+
+    @cli_errors()
+    def main(argv: list[str] | None = None) -> int: ...
+
+    @cli_errors(ValueError)                                   # also report ValueError as a user error
+    @cli_errors(ErrorExit(TrainingDiverged, 1, "training diverged: "))   # another status and a prefix
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import ParamSpec
+
+from .errors import InputError
+
+EXIT_USER_ERROR = 2
+"""Exit status of a CLI refusing its input (argparse uses 2 for bad arguments too)."""
+
+P = ParamSpec("P")
+
+
+@dataclass(frozen=True)
+class ErrorExit:
+    """One more exception type a CLI reports as a message rather than a traceback."""
+
+    kind: type[Exception]
+    code: int = EXIT_USER_ERROR
+    """Exit status returned for it."""
+    prefix: str = ""
+    """Put before the exception's text, after ``error: ``."""
+
+
+def cli_errors(*also: type[Exception] | ErrorExit) -> Callable[[Callable[P, int]], Callable[P, int]]:
+    """Decorate a CLI ``main``: ``InputError`` (and each of ``also``) -> ``error: ...`` on stderr and its code.
+
+    The first matching entry wins, ``InputError`` first. A ``KeyError`` prints its message without the
+    quotes ``str(KeyError)`` adds.
+    """
+    exits = [ErrorExit(InputError), *(a if isinstance(a, ErrorExit) else ErrorExit(a) for a in also)]
+    for e in exits:
+        if not (isinstance(e.kind, type) and issubclass(e.kind, Exception)):
+            raise TypeError(f"cli_errors takes exception types or ErrorExit, got {e.kind!r}; write @cli_errors()")
+    kinds = tuple(e.kind for e in exits)
+
+    def wrap(main: Callable[P, int]) -> Callable[P, int]:
+        @functools.wraps(main)
+        def run(*args: P.args, **kwargs: P.kwargs) -> int:
+            try:
+                return main(*args, **kwargs)
+            except kinds as exc:
+                rule = next(e for e in exits if isinstance(exc, e.kind))
+                print(f"error: {rule.prefix}{message(exc)}", file=sys.stderr)
+                return rule.code
+
+        return run
+
+    return wrap
+
+
+def message(exc: BaseException) -> str:
+    """The text of ``exc`` as a user should read it."""
+    if isinstance(exc, KeyError) and exc.args:
+        return str(exc.args[0])
+    return str(exc)
