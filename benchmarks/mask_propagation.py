@@ -145,7 +145,7 @@ def train_pair(name: str, paths: dict[str, Path], work: Path, steps: int) -> dic
     datasets = {"truth": d / "dataset_truth_masks", "propagated": d / "dataset_propagated_masks"}
     for kind, labels in (("truth", paths["labels_truth"]), ("propagated", paths["labels_prop"])):
         if not (datasets[kind] / "transforms.json").is_file():
-            sh([*LIVESCENE, "scene", "assemble", "--frames", str(paths["frames"]), "--poses", str(poses), "--labels",
+            sh([*LIVESCENE, "dataset", "assemble", "--frames", str(paths["frames"]), "--poses", str(poses), "--labels",
                 str(labels), "--states", str(states), "--prompts", str(cap / "prompts.yaml"), "--out",
                 str(datasets[kind]), "--no-progress"], logs / f"assemble_{kind}.log")
     targets = d / "targets.npz"

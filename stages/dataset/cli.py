@@ -9,10 +9,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .assemble import AssembleConfig, assemble_scene
 
@@ -37,16 +36,13 @@ def build_parser(prog: str = "livescene dataset") -> argparse.ArgumentParser:
     return parser
 
 
+@cli_errors(ValueError)
 def assemble(args: argparse.Namespace) -> int:
     config = AssembleConfig(frames=args.frames, poses=args.poses, out=args.out, labels=args.labels,
                             states=args.states, prompts=args.prompts, split=args.split, split_n=args.split_n,
                             test_fraction=args.test_fraction, copy_images=args.copy_images,
                             progress=not args.no_progress)
-    try:
-        ds = assemble_scene(config)
-    except (InputError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    ds = assemble_scene(config)
     splits = {s: len(ds.frames_in(s)) for s in ("train", "test")}
     print(f"{args.out}: scene dataset, {len(ds.frames)} frames ({splits['train']} train, {splits['test']} test), "
           f"objects {ds.objects}, {len(ds.meta.get('unregistered_frames', []))} frames without a pose dropped")

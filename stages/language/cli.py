@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 
 def add_encoder_arguments(parser: argparse.ArgumentParser) -> None:
@@ -150,10 +150,7 @@ def _relevancy(args: argparse.Namespace) -> int:
     return 0
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return {"targets": _targets, "query": _query, "relevancy": _relevancy}[args.command](args)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return {"targets": _targets, "query": _query, "relevancy": _relevancy}[args.command](args)

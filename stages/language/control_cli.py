@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import yaml
 
 from stages.scene import InputError
+from stages.scene.cli_errors import cli_errors
 
 from .cli import add_encoder_arguments, encoder_from_args
 
@@ -54,13 +54,9 @@ def _parse_states(items: list[str]) -> dict[str, float]:
     return out
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return _control(args)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return _control(build_parser().parse_args(argv))
 
 
 def _control(args: argparse.Namespace) -> int:

@@ -13,10 +13,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from pathlib import Path
 
 from stages.scene import InputError, write_json
+from stages.scene.cli_errors import cli_errors
 
 
 def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
@@ -54,13 +54,10 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
     return parser
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return {"sweep": _sweep, "scene": _scene, "index": _index}[args.command](args)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return {"sweep": _sweep, "scene": _scene, "index": _index}[args.command](args)
 
 
 def _sweep(args: argparse.Namespace) -> int:

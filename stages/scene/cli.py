@@ -12,8 +12,8 @@ import argparse
 import json
 import sys
 
+from .cli_errors import cli_errors
 from .dataset import read_scene
-from .errors import InputError
 
 
 def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
@@ -27,6 +27,7 @@ def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
     return parser
 
 
+@cli_errors()
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "assemble":  # `livescene scene assemble` is routed to the dataset stage by stages.cli
@@ -34,11 +35,7 @@ def main(argv: list[str] | None = None) -> int:
               "(or `python -m stages.dataset assemble`) with the same options", file=sys.stderr)
         return 2
     args = build_parser().parse_args(argv)
-    try:
-        ds = read_scene(args.path, validate=True, deep=getattr(args, "deep", False))
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    ds = read_scene(args.path, validate=True, deep=getattr(args, "deep", False))
     if args.command == "validate":
         print(f"{args.path}: valid scene dataset, {len(ds.frames)} frames, objects {ds.objects}")
     else:

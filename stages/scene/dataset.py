@@ -280,7 +280,7 @@ def _apply_split_lists(data: dict[str, Any], frames: list[Frame], tpath: Path) -
             frame.split = split
         elif frame.split != split:
             raise SceneError(tpath, f"frame {frame.file_path} has split {frame.split!r} but is listed in {key}",
-                             "regenerate the file (`livescene scene assemble` writes both from one split)")
+                             "regenerate the file (`livescene dataset assemble` writes both from one split)")
 
 
 def split_lists(frames: list[Frame]) -> dict[str, list[str]]:
