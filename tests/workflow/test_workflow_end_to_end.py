@@ -39,9 +39,13 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
 
     results = wf.root / "results" / "tiny"
     for rule in ("capture", "frames", "poses", "pose_compare", "labels", "states", "assemble", "language_targets",
-                 "train_livescene", "evaluate_livescene", "sweep_livescene", "control_livescene", "report"):
+                 "train_livescene", "evaluate_livescene", "sweep_livescene", "control_livescene", "export_livescene",
+                 "report"):
         assert (results / "benchmarks" / f"{rule}.tsv").is_file(), rule
         assert (results / "logs" / f"{rule}.log").is_file(), rule
+    exported = json.loads((results / "export" / "livescene" / "export.json").read_text())
+    closed, opened = {"cabinet": 0.0, "drawer": 0.0}, {"cabinet": 1.0, "drawer": 1.0}  # config export.states
+    assert [e["states"] for e in exported["exports"]] == [closed, opened]
     metrics = json.loads((results / "eval" / "livescene" / "metrics.json").read_text())
     assert math.isfinite(metrics["held_out"]["psnr"]["mean"])
     sweep = json.loads((results / "sweep" / "livescene" / "sweep.json").read_text())
@@ -56,6 +60,7 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     html = (wf.root / "reports" / "scenes" / "tiny.html").read_text()
     assert "planned (no benchmark yet)" not in html  # every needed rule ran and was measured
     assert "stability.run is false" in html and 'type="range"' in html
+    assert "Export: meshes and point clouds" in html and "cabinet=1, drawer=1" in html
     assert html.count("data:image/png;base64,") >= 3 + 4 + 1  # grid (truth, render, error), sweeps, command
     _check_user_capture(wf)
     index = (wf.root / "reports" / "index.html").read_text()
@@ -89,7 +94,7 @@ def _check_user_capture(wf):
     """The video scene without truth: no truth-based rule ran, its synonyms reached grounding and commands."""
     results = wf.root / "results" / "filmed"
     for rule in ("frames", "poses", "labels", "states", "assemble", "language_targets", "train_livescene",
-                 "evaluate_livescene", "sweep_livescene", "control_livescene", "report"):
+                 "evaluate_livescene", "sweep_livescene", "control_livescene", "export_livescene", "report"):
         assert (results / "benchmarks" / f"{rule}.tsv").is_file(), rule
     assert not (results / "pose_error.json").exists() and not (results / "capture").exists()
     metrics = json.loads((results / "eval" / "livescene" / "metrics.json").read_text())
