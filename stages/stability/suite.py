@@ -1,63 +1,112 @@
-"""Run a selection of cases and turn the rows into the table and the JSON summary the report includes."""
+"""Run the packaged stability checks through pytest's API and turn their rows into the table and the summary.
+
+The checks live in ``stages/stability/checks`` (plain pytest tests) and ship with the package, so
+``livescene stability`` works the same in this repository and on an installed copy: :func:`run_suite`
+calls ``pytest.main`` on that folder with the package's own ``pytest.ini`` (no configuration of the
+current folder or auto-loaded plugin changes what runs) and the :class:`SummaryCollector` plugin, which
+builds the JSON summary the report reads.
+"""
 
 from __future__ import annotations
 
-import platform
+import contextlib
+import os
+import sys
 import tempfile
-import time
-from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import torch
+import pytest
 
-from . import bad_input_cases, guard_cases, interrupted_cases, numerics_cases  # noqa: F401  (register the cases)
-from .case_context import CaseContext
-from .case_registry import CASES, GROUPS, Case, CaseResult, run_case
+from .collector import GROUPS, SUMMARY_FORMAT, CaseResult, SummaryCollector
 
-SUMMARY_FORMAT = 1
+PACKAGE = Path(__file__).resolve().parent
+CHECKS_DIR = PACKAGE / "checks"
+"""The test package ``livescene stability`` runs."""
+CAPTURES_DIR = PACKAGE / "captures"
+"""Capture presets the checks render (package data: copies of the workflow's config/captures presets)."""
 
-
-def select(names: Iterable[str] | None = None, groups: Iterable[str] | None = None) -> list[Case]:
-    """Cases by name and/or group, in registration order; unknown names are a ValueError listing the known ones."""
-    names = list(names or [])
-    unknown = sorted(set(names) - set(CASES))
-    if unknown:
-        raise ValueError(f"unknown stability cases {unknown}; known: {sorted(CASES)}")
-    chosen = [c for c in CASES.values() if (not names or c.name in names)]
-    groups = list(groups or [])
-    chosen = [c for c in chosen if not groups or c.group in groups]
-    return sorted(chosen, key=lambda c: GROUPS.index(c.group))  # numerics first, as the table reads
+__all__ = ["CAPTURES_DIR", "CHECKS_DIR", "GROUPS", "SUMMARY_FORMAT", "SuiteRun", "format_markdown", "format_table",
+           "pytest_args", "run_suite"]
 
 
-def run_suite(cases: list[Case], *, quick: bool = False, workdir: Path | None = None, device: str = "cpu",
-              threads: int = 1, on_result: Any = None) -> dict[str, Any]:
-    """Run ``cases`` (each in its own scratch folder) and return the JSON summary."""
-    t0 = time.perf_counter()
-    rows: list[CaseResult] = []
-    torch_threads = torch.get_num_threads()
+@dataclass
+class SuiteRun:
+    """What one pytest run of the checks gave."""
+
+    summary: dict[str, Any]
+    """The JSON summary (``SummaryCollector.summary``)."""
+    exit_code: int
+    """pytest's exit status (0 all passed, 1 some failed, 2 interrupted, 4 usage error, 5 nothing collected)."""
+    error: str = ""
+    """Why nothing ran (an unknown case name); empty otherwise."""
+    collected: list[dict[str, Any]] = field(default_factory=list)
+    """The selected cases in run order: name, group, checks, nodeid, markers."""
+
+
+def pytest_args(*, quick: bool = False, threads: int = 1, workdir: Path | None = None, workflow: Path | None = None,
+                captures: Path | None = None, paths: list[Path] | None = None, collect_only: bool = False,
+                extra: list[str] | None = None) -> list[str]:
+    """The pytest command line of a run: the checks folder, its ini file, and the ``--stability-*`` options."""
+    args = [str(p) for p in (paths or [CHECKS_DIR])]
+    args += ["-c", str(CHECKS_DIR / "pytest.ini"), "--stability-threads", str(threads)]
+    if quick:
+        args.append("--stability-quick")
+    for option, value in (("--stability-workdir", workdir), ("--stability-workflow", workflow),
+                          ("--stability-captures", captures)):
+        if value is not None:
+            args += [option, str(Path(value).resolve())]
+    args += ["--collect-only", "-q"] if collect_only else ["-v", "--tb=short"]
+    return args + list(extra or [])
+
+
+def run_suite(cases: list[str] | None = None, groups: list[str] | None = None, *, quick: bool = False,
+              workdir: Path | None = None, threads: int = 1, workflow: Path | None = None,
+              captures: Path | None = None, collect_only: bool = False,
+              on_result: Callable[[CaseResult], None] | None = None, paths: list[Path] | None = None,
+              extra: list[str] | None = None) -> SuiteRun:
+    """Run the selected checks (all by default) in this process; pytest's own output goes to stderr.
+
+    ``cases`` are exact case names and ``groups`` group names; ``workflow`` (a checkout holding Snakefile,
+    workflow/ and config/) enables the check that runs the workflow; ``captures`` replaces the packaged
+    capture presets; ``paths``/``extra`` are for tests of this function (other test folders, pytest options).
+    """
+    collector = SummaryCollector(cases, groups, quick=quick, threads=threads, on_result=on_result)
+    with contextlib.ExitStack() as stack:
+        if workdir is None and not collect_only:  # scratch files go with the run, as pytest's own would not
+            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="livescene-stability-")))
+        args = pytest_args(quick=quick, threads=threads, workdir=workdir, workflow=workflow, captures=captures,
+                           paths=paths, collect_only=collect_only, extra=extra)
+        # stdout carries the table: pytest's progress and tracebacks go to stderr (the workflow's log)
+        stack.enter_context(contextlib.redirect_stdout(sys.stderr))
+        stack.enter_context(_env(PYTEST_DISABLE_PLUGIN_AUTOLOAD="1", PYTEST_ADDOPTS=None))
+        code = int(pytest.main(args, plugins=[collector]))
+    return SuiteRun(collector.summary(), code, collector.error, collector.collected)
+
+
+@contextlib.contextmanager
+def _env(**values: str | None):
+    """Set (or, for None, remove) environment variables for the duration of the run.
+
+    Plugins installed beside pytest (auto-loaded through entry points) and PYTEST_ADDOPTS would change
+    what runs, in which order and with which options; the checks need neither.
+    """
+    saved = {k: os.environ.get(k) for k in values}
     try:
-        with tempfile.TemporaryDirectory(prefix="livescene-stability-") as tmp:
-            ctx = CaseContext(Path(workdir) if workdir else Path(tmp), quick=quick, device=device, threads=threads)
-            for c in cases:
-                row = run_case(c, ctx)
-                rows.append(row)
-                if on_result is not None:
-                    on_result(row)
+        for k, v in values.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        yield
     finally:
-        torch.set_num_threads(torch_threads)  # the cases pin torch to `threads`; the caller gets its own back
-    counts = Counter(r.result for r in rows)
-    return {
-        "format": SUMMARY_FORMAT,
-        "quick": quick,
-        "counts": {k: counts.get(k, 0) for k in ("pass", "fail", "error", "skip")},
-        "seconds": round(time.perf_counter() - t0, 1),
-        "machine": {"python": platform.python_version(), "torch": torch.__version__,
-                    "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
-                    "threads": threads},
-        "cases": [r.to_dict() for r in rows],
-    }
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def format_table(rows: list[dict[str, Any]], width: int = 100) -> str:

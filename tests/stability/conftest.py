@@ -1,17 +1,48 @@
-"""One CaseContext per test module: the quick settings of `livescene stability --quick`, tiny scenes shared;
-torch's thread count is restored afterwards for the tests that follow."""
+"""The packaged stability checks, run in quick mode through the same pytest API as `livescene stability`.
+
+Each outer test reads its case's row from a summary; the summaries come from two runs made on first use,
+one of the fast cases and one of the `slow` ones (interrupted runs start real processes), each limited to
+the cases this session selected (`-k`, `-m 'not slow'`), with this checkout as the `--workflow`.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
 import pytest
-import torch
 
-from stages.stability import CaseContext
+from stages.stability import run_suite
+
+REPO = Path(__file__).resolve().parents[2]
+"""This checkout: the workflow the check `bad_workflow_config_wrong_type` dry-runs."""
 
 
-@pytest.fixture(scope="module")
-def stability_ctx(tmp_path_factory) -> CaseContext:
-    threads = torch.get_num_threads()
-    ctx = CaseContext(tmp_path_factory.mktemp("stability"), quick=True, threads=1)
-    yield ctx
-    torch.set_num_threads(threads)
+def _selected_cases(session: pytest.Session, slow: bool) -> list[str]:
+    """Case names of this session's selected `test_case` items of one speed."""
+    names = []
+    for item in session.items:
+        callspec = getattr(item, "callspec", None)
+        is_case = getattr(item, "originalname", "") == "test_case" and callspec is not None
+        if is_case and (item.get_closest_marker("slow") is not None) == slow:
+            names.append(callspec.params["case"])
+    return names
+
+
+@pytest.fixture(scope="session")
+def stability_summary(request: pytest.FixtureRequest,
+                      tmp_path_factory: pytest.TempPathFactory) -> Callable[[bool], dict[str, Any]]:
+    """``summary(slow)``: the quick summary of the selected fast (or slow) cases, run once per session."""
+    runs: dict[bool, dict[str, Any]] = {}
+
+    def summary(slow: bool) -> dict[str, Any]:
+        if slow not in runs:
+            cases = _selected_cases(request.session, slow)
+            run = run_suite(cases, quick=True, threads=1, workflow=REPO,
+                            workdir=tmp_path_factory.mktemp("slow" if slow else "fast"))
+            assert run.exit_code in (0, 1) and not run.error, f"the checks did not run: {run.exit_code} {run.error}"
+            runs[slow] = run.summary
+        return runs[slow]
+
+    return summary

@@ -1,10 +1,13 @@
-"""Tiny scene datasets for the stability cases, built in a fraction of a second.
+"""Tiny scene datasets for the stability checks, built in a fraction of a second.
 
 Two kinds: :func:`hand_built_dataset` draws images and masks with numpy (so a
-case controls exactly the states, masks, object count and units), and
-:func:`capture_dataset` renders a named capture preset of ``config/captures``
-(``stiff``, ``stress``, ``extreme``, ``demo``) at a tiny size through
-``stages.capture``, then writes its truth dataset.
+check controls exactly the states, masks, object count and units), and
+:func:`capture_dataset` renders a named capture preset (``stiff``, ``stress``,
+``extreme``, ``demo``, ``tiny``) at a tiny size through ``stages.capture``, then
+writes its truth dataset. The presets are read from a folder the caller names
+(the ``ctx`` fixture: the package's copies in ``stages/stability/captures`` or
+``--captures``), never from the repository's ``config/captures``: the checks run
+on an installed copy as well.
 """
 
 from __future__ import annotations
@@ -17,8 +20,6 @@ import numpy as np
 import yaml
 
 from stages.scene import Camera, Frame, SceneDataset, label_map_to_onehot, look_at, write_mask, write_scene
-
-CAPTURE_PRESETS = Path(__file__).resolve().parents[2] / "config" / "captures"
 
 StatesFn = Callable[[int, int], dict[str, float]]
 """(frame index, frame count) -> {object: state}."""
@@ -96,9 +97,17 @@ def hand_built_dataset(root: Path, *, n_frames: int = 8, n_objects: int = 2, wid
     return ds
 
 
-def capture_spec_data(preset: str, *, width: int, height: int, n_frames: int) -> dict:
-    """A capture preset from config/captures, shrunk to a tiny video (lengths and units untouched)."""
-    data = yaml.safe_load((CAPTURE_PRESETS / f"{preset}.yaml").read_text()) or {}
+def preset_file(presets: Path, preset: str) -> Path:
+    """``presets/<preset>.yaml``; a missing one fails the check naming the folder and the way to fix it."""
+    path = Path(presets) / f"{preset}.yaml"
+    assert path.is_file(), (f"capture preset {path} does not exist; fix: pass --captures DIR with {preset}.yaml "
+                            "(e.g. config/captures of a checkout)")
+    return path
+
+
+def capture_spec_data(presets: Path, preset: str, *, width: int, height: int, n_frames: int) -> dict:
+    """Capture preset ``preset`` of folder ``presets``, shrunk to a tiny video (lengths and units untouched)."""
+    data = yaml.safe_load(preset_file(presets, preset).read_text()) or {}
     data.setdefault("name", preset)
     data.setdefault("video", {}).update(width=width, height=height, n_frames=n_frames)
     render = data.setdefault("render", {})
@@ -106,13 +115,14 @@ def capture_spec_data(preset: str, *, width: int, height: int, n_frames: int) ->
     return data
 
 
-def capture_dataset(workdir: Path, preset: str, *, width: int = 32, height: int = 24, n_frames: int = 8) -> Path:
+def capture_dataset(workdir: Path, presets: Path, preset: str, *, width: int = 32, height: int = 24,
+                    n_frames: int = 8) -> Path:
     """Render a tiny version of a capture preset and write its truth scene dataset; returns the dataset folder."""
-    # imported on use: the capture stage takes seconds to import and only the capture cases need it
+    # imported on use: the capture stage takes seconds to import and only the capture checks need it
     from stages.capture import capture_to_dataset, generate_capture, spec_from_dict
 
-    data = capture_spec_data(preset, width=width, height=height, n_frames=n_frames)
-    spec = spec_from_dict(data, CAPTURE_PRESETS / f"{preset}.yaml")
+    data = capture_spec_data(presets, preset, width=width, height=height, n_frames=n_frames)
+    spec = spec_from_dict(data, preset_file(presets, preset))
     cap = workdir / f"capture-{preset}"
     generate_capture(spec, cap, progress=False)
     out = workdir / f"dataset-{preset}"

@@ -1,8 +1,10 @@
-"""Train a tiny LiveScene for a few steps and collect what the stability cases check.
+"""Train a tiny LiveScene for a few steps and collect what the stability checks check.
 
 The config is the ``cpu-demo`` preset shrunk to a few hundred parameters per
 plane, so a step takes milliseconds; the trainer, its non-finite guards and the
-model code are exactly those of ``livescene train``.
+model code are exactly those of ``livescene train``. The checks here are plain
+``assert`` statements that conftest.py registers for pytest's assertion
+rewriting, so they hold under ``python -O`` as they do in the test modules.
 """
 
 from __future__ import annotations
@@ -16,8 +18,6 @@ import torch
 
 from stages.model import Trainer, load_config
 from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
-
-from .case_registry import require
 
 TINY_MODEL = [
     *TINY_MODEL_OVERRIDES,
@@ -78,23 +78,24 @@ def train_briefly(data: Path, out: Path, *, steps: int, overrides: list[str] | N
         if result is None:
             run.skipped += 1
             continue
-        require(all(math.isfinite(v) for v in result.values()), f"step {trainer.step}: non-finite loss {result}")
+        assert all(math.isfinite(v) for v in result.values()), f"step {trainer.step}: non-finite loss {result}"
         bad = nonfinite_grads(trainer.model)
-        require(not bad, f"step {trainer.step}: non-finite gradients in {bad[:3]}")
+        assert not bad, f"step {trainer.step}: non-finite gradients in {bad[:3]}"
         if not run.losses:
             run.first_terms = dict(result)
         run.last_terms = dict(result)
         run.losses.append(float(result["loss"]))
     bad = [n for n, p in trainer.model.named_parameters() if not bool(torch.isfinite(p).all())]
-    require(not bad, f"parameters not finite after training: {bad[:3]}")
+    assert not bad, f"parameters not finite after training: {bad[:3]}"
     return run
 
 
 def require_learning(run: BriefRun, what: str) -> None:
-    """The 'useful result' half of a case: no skipped step, and the loss went down."""
-    require(run.skipped == 0, f"{what}: {run.skipped} of {run.skipped + len(run.losses)} steps were skipped as "
-                              "non-finite")
-    require(run.last < run.first, f"{what}: loss did not decrease ({run.summary()})")
+    """The 'useful result' half of a check: no skipped step, and the loss went down."""
+    assert run.skipped == 0, (
+        f"{what}: {run.skipped} of {run.skipped + len(run.losses)} steps were skipped as "
+        "non-finite")
+    assert run.last < run.first, f"{what}: loss did not decrease ({run.summary()})"
 
 
 @torch.no_grad()
@@ -109,7 +110,7 @@ def render_held_out(run: BriefRun, n_rays: int = 256) -> dict[str, float]:
     out = model(batch.rays, step=trainer.step)
     model.train()
     for key in ("rgb", "depth", "accumulation", "logits"):
-        require(bool(torch.isfinite(out[key]).all()), f"rendered {key} has non-finite values")
+        assert bool(torch.isfinite(out[key]).all()), f"rendered {key} has non-finite values"
     mse = float((out["rgb"].clamp(0, 1) - batch.rgb).square().mean())
     acc = out["accumulation"]
     return {"psnr": -10 * math.log10(max(mse, 1e-12)), "acc_min": float(acc.min()), "acc_max": float(acc.max())}

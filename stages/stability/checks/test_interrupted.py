@@ -1,5 +1,6 @@
-"""Interrupted runs: `livescene train` killed midway (SIGTERM, then SIGKILL), rerun with --resume, ends with
-weights bit-identical to an uninterrupted run of the same seed (CPU)."""
+"""Interrupted runs (group ``interrupted``): `livescene train` killed midway (SIGTERM, then SIGKILL), rerun with
+--resume, ends with weights bit-identical to an uninterrupted run of the same seed (CPU); a Snakemake run of
+the stage CLIs stopped midway reruns only what is incomplete. Both start real processes (marker ``slow``)."""
 
 from __future__ import annotations
 
@@ -11,15 +12,18 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import torch
 import yaml
 
 from stages.scene import read_scene
+from stages.stability.collector import Outcome
 
 from .brief_training import TINY_MODEL, make_trainer
 from .case_context import CaseContext
-from .case_registry import CaseFailed, Outcome, case, require
 from .tiny_scenes import capture_spec_data, hand_built_dataset
+
+pytestmark = [pytest.mark.stability_group("interrupted"), pytest.mark.slow]
 
 STEPS = 40
 """Long enough that the kill lands midway, short enough for the test budget."""
@@ -64,7 +68,7 @@ def _kill_midway(data: Path, out: Path, sig: int, after_step: int, resume: bool 
         time.sleep(0.02)
     if proc.poll() is not None:
         _, err = proc.communicate()
-        raise CaseFailed(f"training ended (rc {proc.returncode}) before it could be interrupted: {err[-300:]}")
+        pytest.fail(f"training ended (rc {proc.returncode}) before it could be interrupted: {err[-300:]}")
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
     return proc.returncode, err
@@ -72,9 +76,9 @@ def _kill_midway(data: Path, out: Path, sig: int, after_step: int, resume: bool 
 
 def _compare(straight: dict[str, torch.Tensor], run: Path) -> int:
     resumed = torch.load(run / "model.pt", weights_only=True)["state_dict"]
-    require(resumed.keys() == straight.keys(), "resumed and uninterrupted runs have different parameters")
+    assert resumed.keys() == straight.keys(), "resumed and uninterrupted runs have different parameters"
     differ = [k for k in straight if not torch.equal(straight[k], resumed[k])]
-    require(not differ, f"resumed weights differ from the uninterrupted run in {differ[:3]}")
+    assert not differ, f"resumed weights differ from the uninterrupted run in {differ[:3]}"
     return sum(v.numel() for v in straight.values())
 
 
@@ -82,7 +86,7 @@ def _resume(data: Path, out: Path) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     done = subprocess.run(_train_command(data, out, resume=True), capture_output=True, text=True, env=env,
                           timeout=300)
-    require(done.returncode == 0, f"the resumed run failed (rc {done.returncode}): {done.stderr[-300:]}")
+    assert done.returncode == 0, f"the resumed run failed (rc {done.returncode}): {done.stderr[-300:]}"
 
 
 def _published_files_complete(out: Path) -> list[str]:
@@ -91,32 +95,31 @@ def _published_files_complete(out: Path) -> list[str]:
         try:
             torch.load(p, map_location="cpu", weights_only=False)
         except Exception as exc:
-            raise CaseFailed(f"{p.name} is not a complete checkpoint after the kill ({exc})") from exc
+            pytest.fail(f"{p.name} is not a complete checkpoint after the kill ({exc})")
     return sorted(p.name for p in out.rglob(".*") if p.is_file())
 
 
-@case("killed_twice_resume_bit_exact", "interrupted",
-      "`livescene train` receiving SIGTERM midway saves a checkpoint and exits 143 without model.pt; rerun with "
-      "--resume and killed hard (SIGKILL, no handler runs) later, it leaves only complete checkpoints; the third "
-      "run resumes and ends with weights bit-identical to an uninterrupted run (CPU, same seed, no time budget)")
-def killed_twice_resume_bit_exact(ctx: CaseContext) -> Outcome:
+def test_killed_twice_resume_bit_exact(ctx: CaseContext, outcome: Outcome) -> None:
+    """`livescene train` receiving SIGTERM midway saves a checkpoint and exits 143 without model.pt; rerun with
+    --resume and killed hard (SIGKILL, no handler runs) later, it leaves only complete checkpoints; the third
+    run resumes and ends with weights bit-identical to an uninterrupted run (CPU, same seed, no time budget)"""
     data = hand_built_dataset(ctx.folder("interrupt-ds") / "ds").root
     out = ctx.folder("interrupt-run") / "run"
     rc, err = _kill_midway(data, out, signal.SIGTERM, after_step=5)
-    require(rc == 143, f"SIGTERM: exit status {rc}, expected 143; stderr: {err[-300:]}")
-    require("resume" in err, f"the SIGTERM message does not say how to resume: {err[-200:]!r}")
-    require(not (out / "model.pt").exists(), "an interrupted run wrote model.pt")
+    assert rc == 143, f"SIGTERM: exit status {rc}, expected 143; stderr: {err[-300:]}"
+    assert "resume" in err, f"the SIGTERM message does not say how to resume: {err[-200:]!r}"
+    assert not (out / "model.pt").exists(), "an interrupted run wrote model.pt"
     termed = sorted(int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("step_*.pt"))
-    require(bool(termed) and max(termed) < STEPS, f"checkpoints after SIGTERM: {termed}")
+    assert bool(termed) and max(termed) < STEPS, f"checkpoints after SIGTERM: {termed}"
     rc, _ = _kill_midway(data, out, signal.SIGKILL, after_step=20, resume=True)
-    require(rc == -signal.SIGKILL, f"exit status {rc}, expected {-signal.SIGKILL} (killed)")
-    require(not (out / "model.pt").exists(), "a killed run has model.pt")
+    assert rc == -signal.SIGKILL, f"exit status {rc}, expected {-signal.SIGKILL} (killed)"
+    assert not (out / "model.pt").exists(), "a killed run has model.pt"
     leftovers = _published_files_complete(out)
     killed = sorted(int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("step_*.pt"))
     _resume(data, out)
     n = _compare(_straight_weights(ctx, data), out)
     leftovers += [p for p in _published_files_complete(out) if p not in leftovers]
-    return Outcome(f"SIGTERM at step {max(termed)}, SIGKILL after step {max(killed)} of {STEPS}; resumed twice: "
+    outcome.record(f"SIGTERM at step {max(termed)}, SIGKILL after step {max(killed)} of {STEPS}; resumed twice: "
                    f"{n} weights bit-identical to the uninterrupted run; {len(leftovers)} temp files left",
                    {"sigterm_checkpoint": max(termed), "sigkill_checkpoint": max(killed), "weights": n,
                     "temp_files": leftovers})
@@ -164,13 +167,12 @@ def _job_counts(dry_run_output: str) -> dict[str, int]:
     return counts
 
 
-@case("snakemake_interrupt_reruns_incomplete", "interrupted",
-      "a Snakemake run of stage CLIs (capture -> dataset -> train --resume) stopped by SIGTERM during training "
-      "leaves the finished outputs intact and no train output; `snakemake -n` then plans only the train job, and "
-      "the rerun resumes from the last checkpoint, leaves capture and dataset untouched, and completes")
-def snakemake_interrupt_reruns_incomplete(ctx: CaseContext) -> Outcome:
+def test_snakemake_interrupt_reruns_incomplete(ctx: CaseContext, outcome: Outcome) -> None:
+    """a Snakemake run of stage CLIs (capture -> dataset -> train --resume) stopped by SIGTERM during training
+    leaves the finished outputs intact and no train output; `snakemake -n` then plans only the train job, and
+    the rerun resumes from the last checkpoint, leaves capture and dataset untouched, and completes"""
     root = ctx.folder("snakemake-interrupt")
-    spec = capture_spec_data("tiny", width=32, height=24, n_frames=6)
+    spec = capture_spec_data(ctx.captures, "tiny", width=32, height=24, n_frames=6)
     (root / "spec.yaml").write_text(yaml.safe_dump(spec))
     overrides = " ".join(f"--set {item}" for item in [*TINY_MODEL, "train.threads=1", "train.checkpoint_every=5"])
     (root / "Snakefile").write_text(SNAKEFILE.format(python=sys.executable, overrides=overrides, steps=STEPS))
@@ -183,29 +185,29 @@ def snakemake_interrupt_reruns_incomplete(ctx: CaseContext) -> Outcome:
         time.sleep(0.05)
     if proc.poll() is not None:
         out, _ = proc.communicate()
-        raise CaseFailed(f"snakemake ended (rc {proc.returncode}) before training was under way: {out[-400:]}")
+        pytest.fail(f"snakemake ended (rc {proc.returncode}) before training was under way: {out[-400:]}")
     os.killpg(proc.pid, signal.SIGTERM)  # what a scheduler or Ctrl-C sends to the whole job
     out, _ = proc.communicate(timeout=120)
-    require(proc.returncode != 0, "snakemake reported success after SIGTERM")
+    assert proc.returncode != 0, "snakemake reported success after SIGTERM"
     ds = read_scene(root / "dataset", validate=True)
-    require(not (root / "run" / "run.json").exists(), "the interrupted train rule left run/run.json")
+    assert not (root / "run" / "run.json").exists(), "the interrupted train rule left run/run.json"
     partial = sorted(str(p.relative_to(root)) for p in root.rglob(".*") if p.is_file()
                      and ".snakemake" not in p.parts and p.name != ".snakemake_timestamp")
-    require(not partial, f"temporary files left by the interrupted run: {partial[:3]}")
+    assert not partial, f"temporary files left by the interrupted run: {partial[:3]}"
     plan = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1"], cwd=root, env=env,
                           capture_output=True, text=True, timeout=120)
     counts = _job_counts(plan.stdout + plan.stderr)
-    require(counts.get("train") == 1 and "capture" not in counts and "dataset" not in counts,
-            f"after the interruption snakemake plans {counts or (plan.stdout + plan.stderr)[-300:]}, expected "
-            "only train")
+    assert counts.get("train") == 1 and "capture" not in counts and "dataset" not in counts, (
+        f"after the interruption snakemake plans {counts or (plan.stdout + plan.stderr)[-300:]}, expected "
+        "only train")
     finished = {k: v for k, v in snapshot_files(root).items() if k.startswith(("capture/", "dataset/"))}
     done = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--quiet"], cwd=root, env=env,
                           capture_output=True, text=True, timeout=300)
-    require(done.returncode == 0, f"the rerun failed: {(done.stdout + done.stderr)[-400:]}")
+    assert done.returncode == 0, f"the rerun failed: {(done.stdout + done.stderr)[-400:]}"
     after = {k: v for k, v in snapshot_files(root).items() if k.startswith(("capture/", "dataset/"))}
-    require(after == finished, "the rerun rewrote capture/ or dataset/ outputs")
+    assert after == finished, "the rerun rewrote capture/ or dataset/ outputs"
     run = json.loads((root / "run" / "run.json").read_text())
-    require(run["steps"] == STEPS, f"the rerun ended at step {run['steps']}, expected {STEPS}")
-    return Outcome(f"SIGTERM during training: dataset of {len(ds.frames)} frames intact, no run.json; rerun "
+    assert run["steps"] == STEPS, f"the rerun ended at step {run['steps']}, expected {STEPS}"
+    outcome.record(f"SIGTERM during training: dataset of {len(ds.frames)} frames intact, no run.json; rerun "
                    f"planned {counts}, resumed and finished {run['steps']} steps",
                    {"planned": counts, "steps": run["steps"]})

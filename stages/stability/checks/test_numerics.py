@@ -1,9 +1,10 @@
-"""Numerical stability cases: stiff and extreme inputs must train and render with finite values.
+"""Numerical stability checks (group ``numerics``): stiff and extreme inputs must train and render finitely.
 
-Each case trains a tiny LiveScene briefly (or probes one component) and checks
+Each check trains a tiny LiveScene briefly (or probes one component) and checks
 finite losses, gradients and renders AND a useful result: the loss goes down,
 the weights stay a distribution, the reduced-precision render stays close to
-float32, a scene in other units trains like the same scene in metres.
+float32, a scene in other units trains like the same scene in metres. A check's
+docstring is the ``checks`` text of its row in the summary (docs/stability.md).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 import yaml
 
@@ -26,19 +28,20 @@ from stages.model.rays import RayBundle
 from stages.model.renderers import render_weights
 from stages.model.scene_normalization import aabb_near_far
 from stages.scene import read_scene
+from stages.stability.collector import Outcome
 
-from .brief_training import make_trainer, nonfinite_grads, render_held_out, require_learning, train_briefly
+from .brief_training import BriefRun, make_trainer, nonfinite_grads, render_held_out, require_learning, train_briefly
 from .case_context import CaseContext
-from .case_registry import CaseSkipped, Outcome, case, require
 from .tiny_scenes import band_labels, capture_dataset, hand_built_dataset, object_names
+
+pytestmark = pytest.mark.stability_group("numerics")
 
 # -- states -------------------------------------------------------------------------------------------------------
 
 
-@case("states_exactly_0_and_1", "numerics",
-      "given states of exactly 0 and 1 (the ends of the k axis) and learned states supervised by key frames of "
-      "exactly 0 and 1 train with finite loss and gradients, the loss decreases, renders at 0 and 1 are finite")
-def states_exactly_0_and_1(ctx: CaseContext) -> Outcome:
+def test_states_exactly_0_and_1(ctx: CaseContext, outcome: Outcome) -> None:
+    """given states of exactly 0 and 1 (the ends of the k axis) and learned states supervised by key frames of
+    exactly 0 and 1 train with finite loss and gradients, the loss decreases, renders at 0 and 1 are finite"""
     root = ctx.folder("states-0-1")
 
     def binary(i: int, n: int) -> dict[str, float]:
@@ -49,23 +52,22 @@ def states_exactly_0_and_1(ctx: CaseContext) -> Outcome:
     require_learning(given, "given states")
     learned = train_briefly(ds.root, root / "learned", steps=ctx.steps, overrides=["model.state.mode=learned"])
     require_learning(learned, "learned states")
-    require("state_mse" in learned.last_terms, "learned mode did not report a state_mse term")
+    assert "state_mse" in learned.last_terms, "learned mode did not report a state_mse term"
     model = given.trainer.model.eval()
     batch = given.trainer.eval_rays.batch(torch.arange(64))
     for value in (0.0, 1.0):
         batch.rays.states = torch.full_like(batch.rays.states, value)
         with torch.no_grad():
             out = model(batch.rays, step=given.trainer.step)
-        require(bool(torch.isfinite(out["rgb"]).all()), f"render at state {value} is not finite")
-    return Outcome(f"given: {given.summary()}; learned: {learned.summary()}",
+        assert bool(torch.isfinite(out["rgb"]).all()), f"render at state {value} is not finite"
+    outcome.record(f"given: {given.summary()}; learned: {learned.summary()}",
                    {"given_loss": [given.first, given.last], "learned_loss": [learned.first, learned.last],
                     "learned_state_mse": learned.last_terms["state_mse"]})
 
 
-@case("states_outside_unit_range", "numerics",
-      "states outside [0, 1] in transforms.json are clamped to [0, 1] when read for training, with a warning "
-      "that names the frame; training stays finite")
-def states_outside_unit_range(ctx: CaseContext) -> Outcome:
+def test_states_outside_unit_range(ctx: CaseContext, outcome: Outcome) -> None:
+    """states outside [0, 1] in transforms.json are clamped to [0, 1] when read for training, with a warning that
+    names the frame; training stays finite"""
     root = ctx.folder("states-outside")
     ds = hand_built_dataset(root / "ds")
     tpath = ds.root / "transforms.json"
@@ -80,30 +82,29 @@ def states_outside_unit_range(ctx: CaseContext) -> Outcome:
         trainer = make_trainer(ds.root, root / "run", steps=ctx.steps)
     said = " ".join(str(w.message) for w in caught) + " " + stderr.getvalue()
     states = torch.cat([trainer.train_rays.states, trainer.eval_rays.states])
-    require(float(states.min()) >= 0.0 and float(states.max()) <= 1.0,
-            f"states in [{float(states.min()):.2f}, {float(states.max()):.2f}] reach the model unclamped "
-            "(the stage that reads transforms.json states should clamp them to [0, 1])")
+    assert float(states.min()) >= 0.0 and float(states.max()) <= 1.0, (
+        f"states in [{float(states.min()):.2f}, {float(states.max()):.2f}] reach the model unclamped "
+        "(the stage that reads transforms.json states should clamp them to [0, 1])")
     for frame in bad_frames:
         fid = Path(frame).stem
-        require(fid in said or frame in said, f"no warning names {frame} (out-of-range state); got {said.strip()!r}")
+        assert fid in said or frame in said, f"no warning names {frame} (out-of-range state); got {said.strip()!r}"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the clamp warning was checked above; -W error must not turn it into a crash
         run = train_briefly(ds.root, root / "run2", steps=ctx.steps)
     require_learning(run, "clamped states")
-    return Outcome(f"clamped, warning names {len(bad_frames)} frames; {run.summary()}",
+    outcome.record(f"clamped, warning names {len(bad_frames)} frames; {run.summary()}",
                    {"loss": [run.first, run.last]})
 
 
-@case("step_change_stiff_capture", "numerics",
-      "the `stiff` capture (a door jumping 0 -> 1 between adjacent frames) trains with finite loss and gradients "
-      "and the loss decreases, with given states and with learned states supervised by a key frame on every "
-      "frame (so two adjacent key frames hold 0 and 1); its truth really contains the jump")
-def step_change_stiff_capture(ctx: CaseContext) -> Outcome:
-    data = ctx.cached("capture-stiff", lambda: capture_dataset(ctx.workdir, "stiff", n_frames=8 if ctx.quick else 16))
+def test_step_change_stiff_capture(ctx: CaseContext, outcome: Outcome) -> None:
+    """the `stiff` capture (a door jumping 0 -> 1 between adjacent frames) trains with finite loss and gradients
+    and the loss decreases, with given states and with learned states supervised by a key frame on every frame
+    (so two adjacent key frames hold 0 and 1); its truth really contains the jump"""
+    data = capture_dataset(ctx.workdir, ctx.captures, "stiff", n_frames=8 if ctx.quick else 16)
     ds = read_scene(data)
     states = ds.state_matrix()
     jump = float(np.abs(np.diff(states, axis=0)).max())
-    require(jump >= 0.99, f"the stiff capture's largest state change between adjacent frames is {jump:.2f}, not a step")
+    assert jump >= 0.99, f"the stiff capture's largest state change between adjacent frames is {jump:.2f}, not a step"
     run = train_briefly(data, ctx.folder("stiff-run"), steps=ctx.steps)
     require_learning(run, "stiff capture")
     render = render_held_out(run)
@@ -111,7 +112,7 @@ def step_change_stiff_capture(ctx: CaseContext) -> Outcome:
     learned = train_briefly(data, ctx.folder("stiff-learned"), steps=ctx.steps,
                             overrides=["model.state.mode=learned", "model.state.key_frame_every=1"])
     require_learning(learned, "stiff capture, learned states with the jump between adjacent key frames")
-    return Outcome(f"jump {jump:.2f} between adjacent frames; given: {run.summary()}; held-out PSNR "
+    outcome.record(f"jump {jump:.2f} between adjacent frames; given: {run.summary()}; held-out PSNR "
                    f"{render['psnr']:.1f}; learned from per-frame key frames: {learned.summary()}",
                    {"max_adjacent_jump": jump, "loss": [run.first, run.last], **render,
                     "learned_loss": [learned.first, learned.last],
@@ -121,10 +122,9 @@ def step_change_stiff_capture(ctx: CaseContext) -> Outcome:
 # -- geometry -----------------------------------------------------------------------------------------------------
 
 
-@case("objects_touching_box", "numerics",
-      "fields sampled exactly on and just outside the faces and corners of the scene box give finite values and "
-      "gradients; a capture whose objects stand against the walls (the box faces) trains finitely")
-def objects_touching_box(ctx: CaseContext) -> Outcome:
+def test_objects_touching_box(ctx: CaseContext, outcome: Outcome) -> None:
+    """fields sampled exactly on and just outside the faces and corners of the scene box give finite values and
+    gradients; a capture whose objects stand against the walls (the box faces) trains finitely"""
     cfg = ModelConfig()
     cfg.field.base_resolution, cfg.field.channels, cfg.field.scales = 8, 4, [1, 2]
     field = RadianceField(cfg.field, 4)
@@ -138,35 +138,34 @@ def objects_touching_box(ctx: CaseContext) -> Outcome:
     sigma, rgb = field(coords, dirs)
     logits = prob(coords[:, :3], torch.rand(len(coords), 2))
     (sigma.sum() + rgb.sum() + logits.sum()).backward()
-    require(bool(torch.isfinite(sigma).all() & torch.isfinite(rgb).all() & torch.isfinite(logits).all()),
-            "field values at the box faces are not finite")
+    assert bool(torch.isfinite(sigma).all() & torch.isfinite(rgb).all() & torch.isfinite(logits).all()), (
+        "field values at the box faces are not finite")
     grads = [p.grad for p in [*field.parameters(), *prob.parameters()] if p.grad is not None]
-    require(all(bool(torch.isfinite(g).all()) for g in grads), "gradients at the box faces are not finite")
+    assert all(bool(torch.isfinite(g).all()) for g in grads), "gradients at the box faces are not finite"
     # the border vertices of the planes must receive gradient (a sample on the face reaches the last grid vertex)
     plane = field.encoding.grids[0].plane_groups[0]  # the stacked spatial planes; xy first
     border = float(plane.grad[0, ..., -1].abs().sum() + plane.grad[0, ..., 0].abs().sum())
-    require(border > 0, "no gradient reaches the border vertices of the xy plane from samples on the box faces")
+    assert border > 0, "no gradient reaches the border vertices of the xy plane from samples on the box faces"
     values = {"probe_points": len(coords), "border_grad": border}
     metric = f"{len(coords)} face/corner samples finite, border-vertex gradient {border:.2g}"
     # a capture whose objects' backs stand on the room walls: the truth scene box is the room
-    data = ctx.cached("capture-demo", lambda: capture_dataset(ctx.workdir, "demo", n_frames=8))
+    data = capture_dataset(ctx.workdir, ctx.captures, "demo", n_frames=8)
     spec = yaml.safe_load((ctx.workdir / "capture-demo" / "truth" / "spec.yaml").read_text())
     box = np.asarray(json.loads((ctx.workdir / "capture-demo" / "truth" / "scene.json").read_text())["scene_box"])
     # objects stand on the floor (z = box min) and, yaw 0, their backs reach position y + depth / 2
     touching = [o["name"] for o in spec["objects"] if abs(o["position"][2] - box[0][2]) < 1e-9
                 or abs(o["position"][1] + o["size"][1] / 2 - box[1][1]) < 1e-9]
-    require(bool(touching), f"no object of the demo capture touches its scene box {box.tolist()}")
+    assert bool(touching), f"no object of the demo capture touches its scene box {box.tolist()}"
     run = train_briefly(data, ctx.folder("touching-run"), steps=ctx.steps)
     require_learning(run, "demo capture, objects against the box faces")
     values["touching_objects"] = touching
     values["loss"] = [run.first, run.last]
-    return Outcome(f"{metric}; demo capture ({', '.join(touching)} on the box faces) {run.summary()}", values)
+    outcome.record(f"{metric}; demo capture ({', '.join(touching)} on the box faces) {run.summary()}", values)
 
 
-@case("rays_missing_the_box", "numerics",
-      "rays that miss the scene box, graze a face, run along an axis or start inside it get finite near/far, "
-      "render the background (accumulation ~0 for misses) and give finite loss and gradients")
-def rays_missing_the_box(ctx: CaseContext) -> Outcome:
+def test_rays_missing_the_box(ctx: CaseContext, outcome: Outcome) -> None:
+    """rays that miss the scene box, graze a face, run along an axis or start inside it get finite near/far,
+    render the background (accumulation ~0 for misses) and give finite loss and gradients"""
     root = ctx.folder("rays-miss")
     ds = hand_built_dataset(root / "ds")
     trainer = make_trainer(ds.root, root / "run", steps=ctx.steps)
@@ -177,22 +176,22 @@ def rays_missing_the_box(ctx: CaseContext) -> Outcome:
     misses = torch.tensor([True, True, True, False, False, False, False, True])  # [3]: grazes the x=y=1 edge
     dirs = torch.nn.functional.normalize(dirs, dim=-1)
     nears, fars = aabb_near_far(origins, dirs, 0.05)
-    require(bool(torch.isfinite(nears).all() & torch.isfinite(fars).all() & (fars > nears).all()),
-            f"near/far not finite or empty: {nears.tolist()} {fars.tolist()}")
+    assert bool(torch.isfinite(nears).all() & torch.isfinite(fars).all() & (fars > nears).all()), (
+        f"near/far not finite or empty: {nears.tolist()} {fars.tolist()}")
     n = len(origins)
     rays = RayBundle(origins, dirs, nears, fars, torch.rand(n, 2), torch.zeros(n))
     model = trainer.model
     out = model(rays, step=0, generator=torch.Generator().manual_seed(0))
     loss = (out["rgb"] - 0.5).square().mean() + out["logits"].square().mean() * 1e-3
     loss.backward()
-    require(bool(torch.isfinite(loss)), "loss on rays missing the box is not finite")
+    assert bool(torch.isfinite(loss)), "loss on rays missing the box is not finite"
     bad = nonfinite_grads(model)
-    require(not bad, f"non-finite gradients from rays missing the box: {bad[:3]}")
+    assert not bad, f"non-finite gradients from rays missing the box: {bad[:3]}"
     acc = out["accumulation"].detach()
     bg_err = float((out["rgb"].detach()[misses] - model.background).abs().max())
-    require(float(acc[misses].max()) < 1e-2, f"rays that miss the box accumulate {float(acc[misses].max()):.3g}")
-    require(bg_err < 1e-2, f"rays that miss the box do not show the background (error {bg_err:.3g})")
-    return Outcome(f"{int(misses.sum())} misses: accumulation <= {float(acc[misses].max()):.1e}, background error "
+    assert float(acc[misses].max()) < 1e-2, f"rays that miss the box accumulate {float(acc[misses].max()):.3g}"
+    assert bg_err < 1e-2, f"rays that miss the box do not show the background (error {bg_err:.3g})"
+    outcome.record(f"{int(misses.sum())} misses: accumulation <= {float(acc[misses].max()):.1e}, background error "
                    f"{bg_err:.1e}; loss and gradients finite",
                    {"miss_accumulation_max": float(acc[misses].max()), "background_error": bg_err})
 
@@ -200,48 +199,48 @@ def rays_missing_the_box(ctx: CaseContext) -> Outcome:
 # -- densities and precision --------------------------------------------------------------------------------------
 
 
-@case("extreme_densities", "numerics",
-      "volume-rendering weights stay finite, in [0, 1] and sum to <= 1 for densities from 0 to inf (log-space "
-      "transmittance) and match a float64 reference; the truncated exp has finite values and gradients at "
-      "|x| = 1e4; training with the density bias at +30 and -30 stays finite")
-def extreme_densities(ctx: CaseContext) -> Outcome:
+def test_extreme_densities(ctx: CaseContext, outcome: Outcome) -> None:
+    """volume-rendering weights stay finite, in [0, 1] and sum to <= 1 for densities from 0 to inf (log-space
+    transmittance) and match a float64 reference; the truncated exp has finite values and gradients at |x| =
+    1e4; training with the density bias at +30 and -30 stays finite"""
     density = torch.tensor([[0.0, 1e-30, 1e-8, 1.0, 1e3, 1e8, 1e30, float("inf")],
                             [float("nan"), 0.0, 1e38, 0.0, 0.0, 0.0, 0.0, 0.0],
                             [1e-30] * 8, [50.0] * 8])
     deltas = torch.full_like(density, 0.01)
     w = render_weights(density, deltas)
-    require(bool(torch.isfinite(w).all()), f"weights not finite: {w}")
-    require(bool((w >= 0).all() & (w <= 1).all()), "weights outside [0, 1]")
-    require(float(w.sum(-1).max()) <= 1.0 + 1e-6, f"weights sum to {float(w.sum(-1).max())} > 1")
-    require(float(w[0, 6]) > 0.999 or float(w[0, :6].sum()) > 0.999, "an opaque sample did not stop the ray")
+    assert bool(torch.isfinite(w).all()), f"weights not finite: {w}"
+    assert bool((w >= 0).all() & (w <= 1).all()), "weights outside [0, 1]"
+    assert float(w.sum(-1).max()) <= 1.0 + 1e-6, f"weights sum to {float(w.sum(-1).max())} > 1"
+    assert float(w[0, 6]) > 0.999 or float(w[0, :6].sum()) > 0.999, "an opaque sample did not stop the ray"
     # float64 reference (product of 1 - alpha) on the rows without inf/nan
     d64 = density[2:].double()
     alpha = 1 - torch.exp(-d64 * 0.01)
     trans = torch.cumprod(torch.cat([torch.ones(2, 1, dtype=torch.float64), 1 - alpha[:, :-1]], -1), -1)
     ref_err = float((w[2:].double() - alpha * trans).abs().max())
-    require(ref_err < 1e-6, f"log-space weights differ from the float64 reference by {ref_err:.2e}")
+    assert ref_err < 1e-6, f"log-space weights differ from the float64 reference by {ref_err:.2e}"
     x = torch.tensor([-1e4, -100.0, 0.0, 15.0, 100.0, 1e4], requires_grad=True)
     y = trunc_exp(x, 15.0)
     y.sum().backward()
-    require(bool(torch.isfinite(y).all() & torch.isfinite(x.grad).all()), "truncated exp not finite at |x| = 1e4")
+    assert bool(torch.isfinite(y).all() & torch.isfinite(x.grad).all()), "truncated exp not finite at |x| = 1e4"
     root = ctx.folder("densities")
     ds = hand_built_dataset(root / "ds")
     runs = {}
     for bias in (30.0, -30.0):
         run = train_briefly(ds.root, root / f"run{bias:+g}", steps=ctx.steps,
                             overrides=[f"model.field.density_bias={bias}"])
-        require(run.skipped == 0, f"density bias {bias:+g}: {run.skipped} steps skipped as non-finite")
+        assert run.skipped == 0, f"density bias {bias:+g}: {run.skipped} steps skipped as non-finite"
         render_held_out(run)
         runs[bias] = run
     high, low = runs[30.0], runs[-30.0]
-    return Outcome(f"weights finite for 0..inf, float64 error {ref_err:.1e}; bias +30: {high.summary()}; "
+    outcome.record(f"weights finite for 0..inf, float64 error {ref_err:.1e}; bias +30: {high.summary()}; "
                    f"bias -30: {low.summary()}",
                    {"reference_error": ref_err, "bias_plus30_loss": [high.first, high.last],
                     "bias_minus30_loss": [low.first, low.last]})
 
 
-def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> Outcome:
-    """Forward + backward of a whole batch (the main field's activations are the largest) under autocast."""
+def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> tuple[str, dict]:
+    """Forward + backward of a whole batch (the main field's activations are the largest) under autocast;
+    returns the metric and the values."""
     root = ctx.folder(f"autocast-{device}-{str(dtype).replace('torch.', '')}")
     ds = hand_built_dataset(root / "ds", width=32, height=24)
     # the main field at its cpu-demo width (2 scales x 16 channels, 64-wide MLPs): its activations are the largest
@@ -270,64 +269,63 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> Outcom
     hook = first.register_forward_hook(lambda m, i, o: seen.append(o.dtype))
     out, loss = forward(True)
     hook.remove()
-    require(seen and all(d == dtype for d in seen), f"the density MLP ran in {set(seen)}, not {dtype}: autocast "
-                                                    "did not reach the largest activations")
-    require(bool(torch.isfinite(loss)), f"{dtype} autocast loss is not finite")
+    assert seen and all(d == dtype for d in seen), (
+        f"the density MLP ran in {set(seen)}, not {dtype}: autocast "
+        "did not reach the largest activations")
+    assert bool(torch.isfinite(loss)), f"{dtype} autocast loss is not finite"
     bad = nonfinite_grads(model)
-    require(not bad, f"{dtype} autocast gradients not finite: {bad[:3]}")
+    assert not bad, f"{dtype} autocast gradients not finite: {bad[:3]}"
     for key in ("rgb", "depth", "accumulation", "logits"):
-        require(bool(torch.isfinite(out[key]).all()), f"{dtype} autocast {key} not finite")
+        assert bool(torch.isfinite(out[key]).all()), f"{dtype} autocast {key} not finite"
     rgb_err = float((out["rgb"].detach().float() - ref_rgb).abs().max())
     loss_rel = abs(float(loss.detach()) - float(ref_loss.detach())) / max(abs(float(ref_loss.detach())), 1e-12)
     tol = 0.05 if dtype == torch.bfloat16 else 0.01
-    require(rgb_err < tol, f"{dtype} autocast rgb differs from float32 by {rgb_err:.3g} (> {tol})")
+    assert rgb_err < tol, f"{dtype} autocast rgb differs from float32 by {rgb_err:.3g} (> {tol})"
     samples = rays * model.config.sampling.num_samples
     width = model.field.encoding.out_dim
     # and the trainer's own path: train.mixed_precision on this device, a few steps, the loss must go down
     precision = "bf16" if dtype == torch.bfloat16 else "fp16"
     run = train_briefly(ds.root, root / "trained", steps=ctx.steps, device=device,
                         overrides=[f"train.mixed_precision={precision}"])
-    require(run.trainer.amp_dtype == dtype, f"train.mixed_precision={precision} on {device} gave autocast "
-                                            f"{run.trainer.amp_dtype}")
+    assert run.trainer.amp_dtype == dtype, (
+        f"train.mixed_precision={precision} on {device} gave autocast "
+        f"{run.trainer.amp_dtype}")
     require_learning(run, f"training with {precision} autocast on {device}")
-    return Outcome(f"{samples} x {width} field activations: max rgb error {rgb_err:.1e}, loss rel. error "
-                   f"{loss_rel:.1e} vs float32; trainer with mixed_precision={precision}: {run.summary()}",
-                   {"rgb_max_error": rgb_err, "loss_rel_error": loss_rel, "activations": [samples, width],
-                    "trained_loss": [run.first, run.last]})
+    return (f"{samples} x {width} field activations: max rgb error {rgb_err:.1e}, loss rel. error "
+            f"{loss_rel:.1e} vs float32; trainer with mixed_precision={precision}: {run.summary()}",
+            {"rgb_max_error": rgb_err, "loss_rel_error": loss_rel, "activations": [samples, width],
+             "trained_loss": [run.first, run.last]})
 
 
-@case("autocast_cpu_bf16", "numerics",
-      "a training forward + backward under CPU bf16 autocast (the main field's MLPs really run in bf16) gives "
-      "finite outputs and gradients, rgb within 0.05 of float32; training with train.mixed_precision=bf16 "
-      "lowers the loss")
-def autocast_cpu_bf16(ctx: CaseContext) -> Outcome:
-    return _autocast_check(ctx, "cpu", torch.bfloat16)
+@pytest.mark.parametrize("dtype", [
+    pytest.param(torch.bfloat16, id="cpu_bf16", marks=pytest.mark.stability_checks(
+        "a training forward + backward under CPU bf16 autocast (the main field's MLPs really run in bf16) gives "
+        "finite outputs and gradients, rgb within 0.05 of float32; training with train.mixed_precision=bf16 "
+        "lowers the loss")),
+    pytest.param(torch.float16, id="cpu_fp16", marks=pytest.mark.stability_checks(
+        "the same under CPU fp16 autocast: finite, rgb within 0.01 of float32; train.mixed_precision=fp16 lowers "
+        "the loss")),
+])
+def test_autocast(ctx: CaseContext, outcome: Outcome, dtype: torch.dtype) -> None:
+    """CPU autocast in bf16 and fp16 (cases autocast_cpu_bf16, autocast_cpu_fp16)."""
+    outcome.record(*_autocast_check(ctx, "cpu", dtype))
 
 
-@case("autocast_cpu_fp16", "numerics",
-      "the same under CPU fp16 autocast: finite, rgb within 0.01 of float32; train.mixed_precision=fp16 lowers "
-      "the loss")
-def autocast_cpu_fp16(ctx: CaseContext) -> Outcome:
-    return _autocast_check(ctx, "cpu", torch.float16)
-
-
-@case("autocast_cuda", "numerics",
-      "the same under CUDA bf16 and fp16 autocast (skipped without a GPU)")
-def autocast_cuda(ctx: CaseContext) -> Outcome:
+def test_autocast_cuda(ctx: CaseContext, outcome: Outcome) -> None:
+    """the same under CUDA bf16 and fp16 autocast (skipped without a GPU)"""
     if not torch.cuda.is_available():
-        raise CaseSkipped("torch sees no CUDA device on this machine")
-    bf = _autocast_check(ctx, "cuda", torch.bfloat16)
-    fp = _autocast_check(ctx, "cuda", torch.float16)
-    return Outcome(f"bf16: {bf.metric}; fp16: {fp.metric}", {"bf16": bf.values, "fp16": fp.values})
+        pytest.skip("torch sees no CUDA device on this machine")
+    bf_metric, bf_values = _autocast_check(ctx, "cuda", torch.bfloat16)
+    fp_metric, fp_values = _autocast_check(ctx, "cuda", torch.float16)
+    outcome.record(f"bf16: {bf_metric}; fp16: {fp_metric}", {"bf16": bf_values, "fp16": fp_values})
 
 
 # -- masks and objects --------------------------------------------------------------------------------------------
 
 
-@case("near_empty_masks", "numerics",
-      "frames where an object covers a single pixel (under H*W/300) are marked unreliable and left out of the "
-      "mask losses; an object absent from a frame is fine; training is finite and the loss decreases")
-def near_empty_masks(ctx: CaseContext) -> Outcome:
+def test_near_empty_masks(ctx: CaseContext, outcome: Outcome) -> None:
+    """frames where an object covers a single pixel (under H*W/300) are marked unreliable and left out of the
+    mask losses; an object absent from a frame is fine; training is finite and the loss decreases"""
     root = ctx.folder("near-empty")
     base = band_labels(2)
 
@@ -345,16 +343,15 @@ def near_empty_masks(ctx: CaseContext) -> Outcome:
     frames = run.trainer.train_rays.frames
     unreliable = [f.file_path for k, f in enumerate(frames) if bool((labels_t[k] == -1).all())]
     expected = [f.file_path for k, f in enumerate(frames) if int(f.frame_id) % 2 == 0]
-    require(unreliable == expected, f"unreliable frames {unreliable}, expected the one-pixel frames {expected}")
-    require(math.isfinite(run.last_terms.get("focal_mask", math.nan)), "focal mask loss missing or not finite")
-    return Outcome(f"{len(unreliable)} one-pixel frames skipped by the mask losses; {run.summary()}",
+    assert unreliable == expected, f"unreliable frames {unreliable}, expected the one-pixel frames {expected}"
+    assert math.isfinite(run.last_terms.get("focal_mask", math.nan)), "focal mask loss missing or not finite"
+    outcome.record(f"{len(unreliable)} one-pixel frames skipped by the mask losses; {run.summary()}",
                    {"unreliable_frames": len(unreliable), "loss": [run.first, run.last]})
 
 
-@case("object_fills_view", "numerics",
-      "frames where one object covers every pixel (no background, no label pairs to repel) train with finite "
-      "focal and repulsion losses and the loss decreases")
-def object_fills_view(ctx: CaseContext) -> Outcome:
+def test_object_fills_view(ctx: CaseContext, outcome: Outcome) -> None:
+    """frames where one object covers every pixel (no background, no label pairs to repel) train with finite
+    focal and repulsion losses and the loss decreases"""
     root = ctx.folder("fills-view")
     base = band_labels(2)
 
@@ -366,15 +363,14 @@ def object_fills_view(ctx: CaseContext) -> Outcome:
     require_learning(run, "object filling the view")
     rays = run.trainer.train_rays
     full = [f for k, f in enumerate(rays.frames) if bool((rays.labels[k] == 0).all())]
-    require(len(full) > 0, "no training frame is filled by the object")
-    return Outcome(f"{len(full)} training frames filled by one object; {run.summary()}",
+    assert len(full) > 0, "no training frame is filled by the object"
+    outcome.record(f"{len(full)} training frames filled by one object; {run.summary()}",
                    {"filled_frames": len(full), "loss": [run.first, run.last]})
 
 
-@case("ten_objects", "numerics",
-      "a scene with 10 objects trains with finite loss and gradients, the loss decreases, the rendered "
-      "probabilities have 11 channels, and the radiance field has as many parameters as with 2 objects")
-def ten_objects(ctx: CaseContext) -> Outcome:
+def test_ten_objects(ctx: CaseContext, outcome: Outcome) -> None:
+    """a scene with 10 objects trains with finite loss and gradients, the loss decreases, the rendered
+    probabilities have 11 channels, and the radiance field has as many parameters as with 2 objects"""
     root = ctx.folder("ten-objects")
     ds = hand_built_dataset(root / "ds", n_objects=10, width=40, height=20)
     run = train_briefly(ds.root, root / "run", steps=ctx.steps)
@@ -383,65 +379,62 @@ def ten_objects(ctx: CaseContext) -> Outcome:
     two = make_trainer(hand_built_dataset(root / "ds2", n_objects=2).root, root / "run2", steps=1)
     n10 = sum(p.numel() for p in run.trainer.model.field.parameters())
     n2 = sum(p.numel() for p in two.model.field.parameters())
-    require(n10 == n2, f"radiance field has {n10} parameters with 10 objects but {n2} with 2")
+    assert n10 == n2, f"radiance field has {n10} parameters with 10 objects but {n2} with 2"
     logits = run.trainer.model.eval()(run.trainer.eval_rays.batch(torch.arange(8)).rays)["logits"]
-    require(logits.shape[-1] == 11, f"probabilities have {logits.shape[-1]} channels, expected 11")
-    return Outcome(f"{run.summary()}; field parameters {n10} (same as 2 objects); held-out PSNR {render['psnr']:.1f}",
+    assert logits.shape[-1] == 11, f"probabilities have {logits.shape[-1]} channels, expected 11"
+    outcome.record(f"{run.summary()}; field parameters {n10} (same as 2 objects); held-out PSNR {render['psnr']:.1f}",
                    {"loss": [run.first, run.last], "field_params": n10, **render})
 
 
-@case("stress_capture", "numerics",
-      "the `stress` capture (10 objects) trains with finite loss and gradients and the loss decreases")
-def stress_capture(ctx: CaseContext) -> Outcome:
-    data = ctx.cached("capture-stress", lambda: capture_dataset(ctx.workdir, "stress", width=48, height=36,
-                                                                n_frames=8))
+def test_stress_capture(ctx: CaseContext, outcome: Outcome) -> None:
+    """the `stress` capture (10 objects) trains with finite loss and gradients and the loss decreases"""
+    data = capture_dataset(ctx.workdir, ctx.captures, "stress", width=48, height=36, n_frames=8)
     run = train_briefly(data, ctx.folder("stress-run"), steps=ctx.steps)
     require_learning(run, "stress capture")
     n = len(run.trainer.ds.objects)
-    require(n >= 10, f"the stress capture has {n} objects, expected 10")
-    return Outcome(f"{n} objects; {run.summary()}", {"objects": n, "loss": [run.first, run.last]})
+    assert n >= 10, f"the stress capture has {n} objects, expected 10"
+    outcome.record(f"{n} objects; {run.summary()}", {"objects": n, "loss": [run.first, run.last]})
 
 
 # -- units --------------------------------------------------------------------------------------------------------
 
 
-def _units_case(ctx: CaseContext, scale: float) -> Outcome:
+@pytest.fixture(scope="module")
+def metres_run(ctx: CaseContext) -> BriefRun:
+    """The room in metres, trained once: both units checks compare their loss curve with it."""
+    return train_briefly(hand_built_dataset(ctx.folder("units-1") / "ds").root, ctx.workdir / "units-1" / "run",
+                         steps=ctx.steps)
+
+
+@pytest.mark.parametrize("scale", [
+    pytest.param(1000.0, id="1000x", marks=pytest.mark.stability_checks(
+        "the same room with every length x1000 (scene box, poses) trains finitely and like the room in metres "
+        "(loss curve within 1e-3 relative)")),
+    pytest.param(0.001, id="0.001x", marks=pytest.mark.stability_checks(
+        "the same room with every length x0.001 trains finitely and like the room in metres (within 1e-3)")),
+])
+def test_units(ctx: CaseContext, outcome: Outcome, metres_run: BriefRun, scale: float) -> None:
+    """The same room in other units (cases units_1000x, units_0.001x)."""
     root = ctx.folder(f"units-{scale:g}")
-    metres = ctx.cached("units-1", lambda: train_briefly(
-        hand_built_dataset(ctx.folder("units-1") / "ds").root, ctx.workdir / "units-1" / "run", steps=ctx.steps))
     ds = hand_built_dataset(root / "ds", units_scale=scale)
     run = train_briefly(ds.root, root / "run", steps=ctx.steps)
     require_learning(run, f"{scale:g}x units")
-    rel = max(abs(a - b) / max(abs(b), 1e-12) for a, b in zip(run.losses, metres.losses, strict=True))
-    require(rel < 1e-3, f"{scale:g}x units train differently from metres: loss rel. difference {rel:.2e}")
+    rel = max(abs(a - b) / max(abs(b), 1e-12) for a, b in zip(run.losses, metres_run.losses, strict=True))
+    assert rel < 1e-3, f"{scale:g}x units train differently from metres: loss rel. difference {rel:.2e}"
     depth = render_held_out(run)
     extent = float(np.max(ds.scene_box[1] - ds.scene_box[0]))
-    return Outcome(f"box {extent:g} units; {run.summary()}; loss within {rel:.1e} of the same scene in metres",
+    outcome.record(f"box {extent:g} units; {run.summary()}; loss within {rel:.1e} of the same scene in metres",
                    {"loss": [run.first, run.last], "max_rel_loss_difference": rel, **depth})
 
 
-@case("units_1000x", "numerics",
-      "the same room with every length x1000 (scene box, poses) trains finitely and like the room in metres "
-      "(loss curve within 1e-3 relative)")
-def units_1000x(ctx: CaseContext) -> Outcome:
-    return _units_case(ctx, 1000.0)
-
-
-@case("units_0.001x", "numerics",
-      "the same room with every length x0.001 trains finitely and like the room in metres (within 1e-3)")
-def units_0_001x(ctx: CaseContext) -> Outcome:
-    return _units_case(ctx, 0.001)
-
-
-@case("extreme_capture", "numerics",
-      "the `extreme` capture (1000x units) trains with finite loss and gradients and the loss decreases")
-def extreme_capture(ctx: CaseContext) -> Outcome:
-    data = ctx.cached("capture-extreme", lambda: capture_dataset(ctx.workdir, "extreme", n_frames=8))
+def test_extreme_capture(ctx: CaseContext, outcome: Outcome) -> None:
+    """the `extreme` capture (1000x units) trains with finite loss and gradients and the loss decreases"""
+    data = capture_dataset(ctx.workdir, ctx.captures, "extreme", n_frames=8)
     run = train_briefly(data, ctx.folder("extreme-run"), steps=ctx.steps)
     require_learning(run, "extreme capture")
     box = run.trainer.ds.scene_box
     extent = float(np.max(box[1] - box[0])) if box is not None else math.nan
-    return Outcome(f"scene box extent {extent:g} units; {run.summary()}", {"extent": extent,
+    outcome.record(f"scene box extent {extent:g} units; {run.summary()}", {"extent": extent,
                                                                          "loss": [run.first, run.last]})
 
 
