@@ -3,30 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pytest
 import yaml
+from yaml_round_trip import assert_unchanged
 
 from stages.capture import CaptureSpecError, load_spec, spec_from_dict, spec_to_dict
 from stages.capture.spec import CaptureSpec, LightSpec, ObjectSpec, ScheduleSpec
-from stages.stability.tiny_scenes import capture_spec_data
+from stages.stability.checks.tiny_scenes import capture_spec_data
 
 PRESETS = Path(__file__).resolve().parents[2] / "config" / "captures"
 SHIPPED = sorted(p.stem for p in PRESETS.glob("*.yaml"))
-
-
-def _assert_unchanged(raw: Any, loaded: Any, where: str) -> None:
-    """Every value the YAML gives is in the spec as written (an int in a float field as that float)."""
-    if isinstance(raw, dict):
-        for key, value in raw.items():
-            _assert_unchanged(value, loaded[key], f"{where}.{key}")
-    elif isinstance(raw, list):
-        assert isinstance(loaded, list) and len(loaded) == len(raw), where
-        for i, (a, b) in enumerate(zip(raw, loaded, strict=True)):
-            _assert_unchanged(a, b, f"{where}[{i}]")
-    else:
-        assert loaded == raw and (type(loaded) is type(raw) or type(loaded) is float), (where, raw, loaded)
 
 
 @pytest.mark.parametrize("preset", SHIPPED)
@@ -34,7 +21,7 @@ def test_every_shipped_spec_loads_unchanged_and_round_trips(preset):
     raw = yaml.safe_load((PRESETS / f"{preset}.yaml").read_text())
     spec = load_spec(PRESETS / f"{preset}.yaml")
     data = spec_to_dict(spec)
-    _assert_unchanged(raw, data, preset)
+    assert_unchanged(raw, data, preset)
     assert isinstance(spec.objects[0], ObjectSpec) and isinstance(spec.objects[0].schedule, ScheduleSpec)
     assert all(isinstance(light, LightSpec) for light in spec.render.lights)
     assert spec_from_dict(data, f"{preset}.yaml") == spec
@@ -44,7 +31,7 @@ def test_every_shipped_spec_loads_unchanged_and_round_trips(preset):
 def test_the_specs_the_tests_and_the_stability_suite_use_load(small_spec):
     spec = small_spec(n_frames=3, width=40, height=30)  # what test_capture_cli writes as its spec file
     assert spec_from_dict(yaml.safe_load(yaml.safe_dump(spec_to_dict(spec))), "small.yaml") == spec
-    data = capture_spec_data("tiny", width=32, height=24, n_frames=6)  # the stability suite's tiny captures
+    data = capture_spec_data(PRESETS, "tiny", width=32, height=24, n_frames=6)  # the stability suite's tiny captures
     spec = spec_from_dict(data, PRESETS / "tiny.yaml")
     assert (spec.video.width, spec.video.n_frames, spec.render.shadows) == (32, 6, False)
     assert spec_from_dict({"name": "bare"}) == CaptureSpec(name="bare")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
 
 import pytest
 import yaml
+from yaml_round_trip import assert_unchanged
 
 from stages.model import config as config_module
 from stages.model.config import METHOD_DIR, PRESET_DIR, RunConfig, config_from_dict, load_config
@@ -86,19 +86,6 @@ def test_a_bad_preset_or_overlay_value_names_its_file(tmp_path, monkeypatch):
     assert "gpu-paper.model.conerf.hidden is 'wide' (a string), expected an integer" in info.value.problem
 
 
-def _assert_unchanged(raw: Any, loaded: Any, where: str) -> None:
-    """Every value the YAML gives is in the config as written (an int in a float field as that float)."""
-    if isinstance(raw, dict):
-        for key, value in raw.items():
-            _assert_unchanged(value, loaded[key], f"{where}.{key}")
-    elif isinstance(raw, list):
-        assert isinstance(loaded, list) and len(loaded) == len(raw), where
-        for i, (a, b) in enumerate(zip(raw, loaded, strict=True)):
-            _assert_unchanged(a, b, f"{where}[{i}]")
-    else:
-        assert loaded == raw and (type(loaded) is type(raw) or type(loaded) is float), (where, raw, loaded)
-
-
 def _merge(base: dict, overlay: dict) -> None:
     for key, value in overlay.items():
         if isinstance(value, dict) and isinstance(base.get(key), dict):
@@ -117,7 +104,7 @@ def test_every_preset_and_method_overlay_loads_unchanged(preset, method):
         overlay = (yaml.safe_load((METHOD_DIR / f"{method}.yaml").read_text()) or {}).get(preset) or {}
         _merge(raw, overlay)  # the overlay wins over the preset
         assert cfg.method == method
-    _assert_unchanged(raw, loaded, f"{preset}+{method}")
+    assert_unchanged(raw, loaded, f"{preset}+{method}")
     assert config_from_dict(loaded) == cfg  # what a run folder saves rebuilds the same config
     assert config_from_dict(yaml.safe_load(yaml.safe_dump(loaded))) == cfg
     for section in dataclasses.fields(RunConfig):
