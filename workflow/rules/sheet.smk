@@ -25,15 +25,19 @@ def _schema_problem(error):
 
 
 def _check_config(cfg):
-    """Validate the merged config; the error names the config file(s), the key and the expected type."""
+    """Validate the merged config and fill its defaults; an error names the config file(s), every bad key and
+    the expected type (snakemake's own message stops at the first)."""
+    try:
+        validate(cfg, schema=str(SCHEMAS / "config.schema.yaml"), set_default=True)
+        return
+    except WorkflowError:
+        pass
     schema = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())
     errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(cfg), key=lambda e: list(e.absolute_path))
-    if errors:
-        files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
-        lines = "\n".join(f"  - {_schema_problem(e)}" for e in errors)
-        raise WorkflowError(f"invalid workflow config in {', '.join(files)}:\n{lines}\n"
-                            f"fix: correct these keys (schema: {SCHEMAS / 'config.schema.yaml'})")
-    validate(cfg, schema="../schemas/config.schema.yaml")  # fills the defaults
+    files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
+    lines = "\n".join(f"  - {_schema_problem(e)}" for e in errors)
+    raise WorkflowError(f"invalid workflow config in {', '.join(files)}:\n{lines}\n"
+                        f"fix: correct these keys (schema: {SCHEMAS / 'config.schema.yaml'})")
 
 
 ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
@@ -107,11 +111,10 @@ def _read_scene_sheet(path):
         lines = "\n".join(f"  - {p}" for p in problems)
         raise WorkflowError(f"invalid scene sheet {sheet_path}:\n{lines}\nfix: correct these cells "
                             f"(schema: {SCHEMAS / 'scenes.schema.yaml'})")
-    for column, prop in schema["properties"].items():
-        default = prop.get("default", "")
-        if column not in sheet:
-            sheet[column] = default
-        sheet[column] = sheet[column].replace("", default)
+    # the schema's defaults fill empty cells and missing columns (snakemake skips empty, i.e. NaN, cells)
+    sheet = sheet.replace("", float("nan"))
+    validate(sheet, schema=str(SCHEMAS / "scenes.schema.yaml"), set_default=True)
+    sheet = sheet.reindex(columns=list(schema["properties"])).fillna("")
     return sheet.set_index("scene", drop=False)
 
 
