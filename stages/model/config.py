@@ -20,7 +20,8 @@ import yaml
 from stages.scene import InputError, read_yaml_mapping
 from stages.scene.typed_yaml import from_mapping
 
-PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "model"
+PRESET_DIR = Path(__file__).resolve().parent / "presets"
+"""The presets, shipped with the package: in a checkout a link to config/model (docs/model.md, Presets)."""
 
 
 @dataclass
