@@ -35,7 +35,7 @@ def build_parser(prog: str = "livescene stability") -> argparse.ArgumentParser:
                         "enables bad_workflow_config_wrong_type, which dry-runs a copy of it (default: skipped)")
     p.add_argument("--captures", type=Path, metavar="DIR",
                    help="folder of capture presets (stiff.yaml, stress.yaml, ...) to render instead of the "
-                        "package's copies, e.g. config/captures of a checkout")
+                        "package's presets (config/captures of the checkout it was built from)")
     return p
 
 

@@ -26,7 +26,7 @@ PACKAGE = Path(__file__).resolve().parent
 CHECKS_DIR = PACKAGE / "checks"
 """The test package ``livescene stability`` runs."""
 CAPTURES_DIR = PACKAGE / "captures"
-"""Capture presets the checks render (package data: copies of the workflow's config/captures presets)."""
+"""Capture presets the checks render (package data; in a checkout a link to the workflow's config/captures)."""
 
 __all__ = ["CAPTURES_DIR", "CHECKS_DIR", "GROUPS", "SUMMARY_FORMAT", "SuiteRun", "format_markdown", "format_table",
            "pytest_args", "run_suite"]

@@ -78,7 +78,8 @@ def test_failures_and_crashes_become_rows(tmp_path, monkeypatch):
 
 
 def test_packaged_capture_presets_match_the_workflow():
-    """The checks render the package's copies of config/captures (an installed copy has no config/)."""
+    """The checks render the package's capture presets, the workflow's config/captures (an installed copy has no
+    config/)."""
     for preset in sorted(CAPTURES_DIR.glob("*.yaml")):
         assert yaml.safe_load(preset.read_text()) == yaml.safe_load((REPO / "config" / "captures" /
                                                                       preset.name).read_text()), preset.name

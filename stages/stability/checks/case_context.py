@@ -16,7 +16,7 @@ class CaseContext:
     workdir: Path
     """Scratch folder; each check writes under its own sub-folders."""
     captures: Path
-    """Folder of the capture presets (``stiff.yaml``, ...): the package's copies unless --captures names one."""
+    """Folder of the capture presets (``stiff.yaml``, ...): the package's presets unless --captures names one."""
     quick: bool = False
     """Fewer steps and frames (the test suite and ``--quick``); the checks are the same."""
     device: str = "cpu"

@@ -5,9 +5,9 @@ check controls exactly the states, masks, object count and units), and
 :func:`capture_dataset` renders a named capture preset (``stiff``, ``stress``,
 ``extreme``, ``demo``, ``tiny``) at a tiny size through ``stages.capture``, then
 writes its truth dataset. The presets are read from a folder the caller names
-(the ``ctx`` fixture: the package's copies in ``stages/stability/captures`` or
-``--captures``), never from the repository's ``config/captures``: the checks run
-on an installed copy as well.
+(the ``ctx`` fixture: the package's presets in ``stages/stability/captures`` or
+``--captures``), never from the repository's layout: the checks run on an
+installed copy as well.
 """
 
 from __future__ import annotations
