@@ -57,18 +57,22 @@ def _straight_weights(ctx: CaseContext, data: Path) -> dict[str, torch.Tensor]:
     return build()
 
 
+def _wait_for(proc: subprocess.Popen, path: Path, seconds: float, what: str, before: str) -> None:
+    """Wait until ``path`` exists while ``proc`` runs; fail naming ``what`` ended early, with its last output."""
+    deadline = time.monotonic() + seconds
+    while not path.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    if proc.poll() is not None:
+        out, err = proc.communicate()
+        pytest.fail(f"{what} ended (rc {proc.returncode}) before {before}: {(err or out or '')[-400:]}")
+
+
 def _kill_midway(data: Path, out: Path, sig: int, after_step: int, resume: bool = False) -> tuple[int, str]:
     """Start `livescene train`, send ``sig`` once the checkpoint of ``after_step`` exists; returns (rc, stderr)."""
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     proc = subprocess.Popen(_train_command(data, out, resume), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
-    target = out / "checkpoints" / f"step_{after_step:06d}.pt"
-    deadline = time.monotonic() + 120
-    while not target.exists() and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.02)
-    if proc.poll() is not None:
-        _, err = proc.communicate()
-        pytest.fail(f"training ended (rc {proc.returncode}) before it could be interrupted: {err[-300:]}")
+    _wait_for(proc, out / "checkpoints" / f"step_{after_step:06d}.pt", 120, "training", "it could be interrupted")
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
     return proc.returncode, err
@@ -179,15 +183,9 @@ def test_snakemake_interrupt_reruns_incomplete(ctx: CaseContext, outcome: Outcom
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "1", "--quiet"], cwd=root, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    first_ckpt = root / "run" / "checkpoints" / "step_000005.pt"
-    deadline = time.monotonic() + 240
-    while not first_ckpt.exists() and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)
-    if proc.poll() is not None:
-        out, _ = proc.communicate()
-        pytest.fail(f"snakemake ended (rc {proc.returncode}) before training was under way: {out[-400:]}")
+    _wait_for(proc, root / "run" / "checkpoints" / "step_000005.pt", 240, "snakemake", "training was under way")
     os.killpg(proc.pid, signal.SIGTERM)  # what a scheduler or Ctrl-C sends to the whole job
-    out, _ = proc.communicate(timeout=120)
+    proc.communicate(timeout=120)
     assert proc.returncode != 0, "snakemake reported success after SIGTERM"
     ds = read_scene(root / "dataset", validate=True)
     assert not (root / "run" / "run.json").exists(), "the interrupted train rule left run/run.json"
