@@ -118,7 +118,8 @@ def main() -> int:
     from stages.export.geometry_compare import chamfer_distance, inside_box
     from stages.model import load_run
     from stages.model.render_cli import main as render_main
-    from stages.model.run_dataset import find_run_dataset, read_run_dataset
+    from stages.model.run import dataset_of_run
+    from stages.scene import read_scene
 
     torch.set_num_threads(args.threads)
     if not (args.run / "model.pt").is_file():
@@ -127,8 +128,8 @@ def main() -> int:
     load = {"before": os.getloadavg()}
     t = time.perf_counter()
     run = load_run(args.run)
-    dataset_dir = find_run_dataset(args.run, run.config.data, args.data)
-    ds = read_run_dataset(args.run, run.config.data, args.data)
+    dataset_dir = dataset_of_run(args.run, args.data)
+    ds = read_scene(dataset_dir, validate=False)
     load_s = time.perf_counter() - t
     capture = args.capture or dataset_dir.parent / "capture"
     truth = Truth(capture, args.object)

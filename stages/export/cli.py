@@ -48,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     import torch  # after argument parsing: --help stays fast
 
     from stages.model import load_run
-    from stages.model.run_dataset import read_run_dataset
+    from stages.model.run import dataset_of_run
+    from stages.scene import read_scene
 
     if args.threads > 0:
         torch.set_num_threads(args.threads)
@@ -57,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     options.check()
     run = load_run(args.run, device=args.device)
     combos = [parse_state_string(s, run.objects) for s in args.states]
-    dataset = read_run_dataset(args.run, run.config.data, args.data)
+    dataset = read_scene(dataset_of_run(args.run, args.data), validate=False)
     doc = export_run(run, dataset, combos, args.out, options, progress=not args.no_progress,
                      run_info={"run": str(args.run), "method": run.method, "step": run.step})
     summary = {"out": args.out, "total_seconds": doc["total_seconds"],

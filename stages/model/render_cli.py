@@ -17,8 +17,7 @@ from stages.scene.cli_errors import cli_errors
 
 from .camera_path import CameraPath, best_view_of, orbit_path, read_camera_path, states_sweep_path
 from .path_video import CODECS, encode_video, frames_dir_for, render_frames
-from .run import LoadedRun, load_run
-from .run_dataset import read_run_dataset
+from .run import LoadedRun, dataset_of_run, load_run
 
 
 def build_parser(prog: str = "livescene render") -> argparse.ArgumentParser:
@@ -118,7 +117,7 @@ def _video_path(args: argparse.Namespace, run: LoadedRun) -> CameraPath:
         if args.fps:
             cp.fps = args.fps
         return cp
-    ds = read_run_dataset(args.run, run.config.data, args.data)
+    ds = read_scene(dataset_of_run(args.run, args.data), validate=False)
     train = [f for f in ds.frames if (f.split or "train") == "train"] or ds.frames
     c2ws = [np.asarray(f.c2w, dtype=np.float64) for f in train]
     camera = _made_path_camera(args, ds.camera_of(train[0]))

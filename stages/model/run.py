@@ -206,8 +206,10 @@ def run_dataset_root(run_dir: str | Path) -> Path | None:
 def dataset_of_run(run_dir: str | Path, data: str | Path | None = None) -> Path:
     """The dataset to open with a run: ``data`` (--data) when given, else the run's own.
 
-    ``RunConfig.data`` is the path as training was given it, so it holds from the folder training ran in;
-    a run opened from elsewhere, or whose dataset moved, gets an error naming its config.yaml and the fix.
+    ``RunConfig.data`` is the path as training was given it: relative to the folder training ran in (the
+    workflow trains from the repository root: ``results/demo/dataset``). It is looked for from the current
+    folder, then from each ancestor of the run folder, so a results folder moved as a whole still opens; a
+    dataset found nowhere is an error naming the run's config.yaml and the fix.
     """
     if data:
         return Path(data)
@@ -216,8 +218,10 @@ def dataset_of_run(run_dir: str | Path, data: str | Path | None = None) -> Path:
     found = run_dataset_root(run_dir)
     if found is None:
         raise InputError(path, "does not say which dataset the run was trained on", "pass --data DS")
-    if not found.is_dir():
-        raise InputError(path, f"names the dataset {found}, which is not there from {Path.cwd()}",
-                         "pass --data DS (the dataset the run was trained on), or start from the folder the run "
-                         "was trained in")
-    return found
+    candidates = [found] if found.is_absolute() else [found, *(parent / found for parent in run_dir.resolve().parents)]
+    for candidate in candidates:
+        if candidate.is_dir():
+            return candidate
+    raise InputError(path, f"names the dataset {found}, which is not there from {Path.cwd()} (nor relative to the "
+                     "run folder's parents)", "pass --data DS (the dataset the run was trained on), or start from "
+                     "the folder the run was trained in")

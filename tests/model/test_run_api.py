@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from stages.model import load_run
 from stages.model.render_cli import main as render_main
+from stages.model.run import dataset_of_run
 from stages.scene import InputError
 
 
@@ -59,3 +61,20 @@ def test_a_model_of_an_older_format_is_refused_with_the_fix(trained_run, tmp_pat
     torch.save(payload, old / "model.pt")
     with pytest.raises(InputError, match=r"older version.*retrain"):
         load_run(old)
+
+
+def test_the_runs_dataset_is_found_from_the_cwd_or_the_run_folders_ancestors(tmp_path, monkeypatch):
+    """config.yaml keeps --data as training got it (relative to where it ran): a moved results tree still opens."""
+    root = tmp_path / "moved" / "repo"
+    dataset, run = root / "results" / "s" / "dataset", root / "results" / "s" / "runs" / "livescene"
+    dataset.mkdir(parents=True)
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text("data: results/s/dataset\n")
+    monkeypatch.chdir(tmp_path)  # not where training ran: found through the run folder's ancestors
+    assert dataset_of_run(run).resolve() == dataset.resolve()
+    monkeypatch.chdir(root)  # where training ran: the path as written
+    assert dataset_of_run(run) == Path("results/s/dataset")
+    assert dataset_of_run(run, "elsewhere") == Path("elsewhere")  # --data wins
+    (run / "config.yaml").write_text("data: results/other/dataset\n")
+    with pytest.raises(InputError, match="names the dataset results/other/dataset, which is not there"):
+        dataset_of_run(run)
