@@ -5,21 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from tiny_capture_spec import small_spec
 
-from stages.capture import CaptureSpec, generate_capture, load_spec
-
-ROOT = Path(__file__).resolve().parents[2]
-PRESETS = ROOT / "config" / "captures"
-
-
-def small_spec(n_frames: int = 8, width: int = 64, height: int = 48) -> CaptureSpec:
-    """The tiny preset, made smaller still: fewer frames, smaller textures, no supersampling."""
-    spec = load_spec(PRESETS / "tiny.yaml")
-    spec.video.n_frames = n_frames
-    spec.video.width, spec.video.height = width, height
-    spec.render.texture_size = 64
-    spec.render.supersample = 1
-    return spec
+from stages.capture import generate_capture
 
 
 @pytest.fixture(name="small_spec")

@@ -12,29 +12,19 @@ from pathlib import Path
 import pytest
 import torch
 from export_truth_run import TruthRun
+from tiny_capture_spec import small_spec
 
-from stages.capture import SceneRenderer, capture_to_dataset, generate_capture, load_spec
+from stages.capture import SceneRenderer, capture_to_dataset, generate_capture
 from stages.model import Trainer, load_config
 from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
 from stages.scene import SceneDataset, read_scene
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def tiny_spec(n_frames: int = 12, width: int = 64, height: int = 48):
-    spec = load_spec(ROOT / "config" / "captures" / "tiny.yaml")
-    spec.video.n_frames = n_frames
-    spec.video.width, spec.video.height = width, height
-    spec.render.texture_size = 64
-    spec.render.supersample = 1
-    return spec
 
 
 @pytest.fixture(scope="session")
 def tiny_capture_dataset(tmp_path_factory) -> tuple[Path, SceneDataset, SceneRenderer]:
     """(capture folder, its truth dataset with every frame a training frame, the truth renderer)."""
     work = tmp_path_factory.mktemp("export_capture")
-    spec = tiny_spec()
+    spec = small_spec(n_frames=12)
     capture = generate_capture(spec, work / "capture", progress=False)
     ds = capture_to_dataset(capture, work / "dataset", split="alternate", progress=False)
     return capture, read_scene(ds.root), SceneRenderer(spec)
