@@ -23,6 +23,8 @@ import torch.nn.functional as F
 
 from stages.scene import Camera, InputError, generate_rays, read_yaml_mapping
 
+from .allocator import keep_freed_memory
+from .chunk_threads import map_chunks
 from .config import RunConfig, config_from_dict
 from .methods import SceneInfo, build_model
 from .rays import RayBundle
@@ -42,6 +44,7 @@ class LoadedRun:
     def __init__(self, run_dir: Path, payload: dict[str, Any], device: str = "cpu") -> None:
         self.run_dir = run_dir
         self.device = torch.device(device)
+        keep_freed_memory()
         self.config = config_from_dict(payload["config"], str(run_dir / "model.pt"))
         self.method = str(payload["method"])
         self.info = SceneInfo(**payload["info"])
@@ -119,11 +122,13 @@ class LoadedRun:
         st = torch.tensor(state, dtype=torch.float32, device=self.device).expand(n, self.info.n_objects)
         times = torch.full((n,), float(time_value), device=self.device)
         rays = RayBundle(o, d, nears, fars, st, times)
-        chunk = self.config.train.render_chunk
         model_outputs = [MODEL_OUTPUT.get(k, k) for k in outputs]
+        # on a CPU, whole chunks go to worker threads (one core each): faster than splitting every op
+        workers = torch.get_num_threads() if self.device.type == "cpu" else 1
+        outs = map_chunks(lambda a, b: self.model(rays.slice(a, b), step=self.step, outputs=model_outputs), n,
+                          self.config.train.render_chunk, workers)
         parts: dict[str, list[torch.Tensor]] = {}
-        for i in range(0, n, chunk):
-            out = self.model(rays.slice(i, i + chunk), step=self.step, outputs=model_outputs)
+        for out in outs:
             if "rgb" in out:
                 parts.setdefault("rgb", []).append(out["rgb"].clamp(0, 1))
             if "depth" in out:

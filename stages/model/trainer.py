@@ -31,6 +31,7 @@ from tqdm import tqdm
 
 from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
 
+from .allocator import keep_freed_memory
 from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
@@ -170,6 +171,7 @@ class Trainer:
         cfg = self.config
         if cfg.train.threads > 0:
             torch.set_num_threads(cfg.train.threads)
+        keep_freed_memory()
         if not cfg.data:
             raise InputError("--data", "no dataset given", "pass --data DS (a scene dataset folder)")
         self.ds = read_scene(cfg.data)

@@ -92,8 +92,8 @@ def test_k_planes_reads_time_not_states(tiny_overrides):
     pos = torch.zeros(4, 3)
     logits = torch.zeros(4, 3)
     t = torch.tensor([0.0, 0.25, 0.5, 1.0])
-    a, _, _ = model.coordinates(pos, torch.zeros(4, 2), logits, t)
-    b, _, _ = model.coordinates(pos, torch.ones(4, 2), logits, t)
+    a = model.coordinates(pos, torch.zeros(4, 2), logits, t)
+    b = model.coordinates(pos, torch.ones(4, 2), logits, t)
     assert torch.equal(a, b)
     assert torch.allclose(a[:, 3], 2 * t - 1)
 

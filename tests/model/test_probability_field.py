@@ -40,3 +40,49 @@ def test_field_learns_regions_from_position():
     pos = torch.rand(32, 3) * 2 - 1
     logits = field(pos, torch.rand(32, 2))
     assert logits.shape == (32, 3) and torch.isfinite(logits).all()
+
+
+def _softmax_projection(logits: torch.Tensor, n_objects: int, threshold: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The projection written with an explicit softmax (what ``project`` computes without forming it)."""
+    probs = torch.softmax(logits, dim=-1)[:, :n_objects]
+    best, u = probs.max(dim=-1)
+    return best >= threshold, u
+
+
+def test_projection_without_softmax_matches_the_softmax_formulation():
+    torch.manual_seed(0)
+    n_objects, threshold = 4, 0.5
+    field = ProbabilityField(ProbabilityConfig(rejection_threshold=threshold, static_value=-1.0), n_objects)
+    scales = torch.tensor([0.1, 1.0, 10.0, 60.0, 200.0]).repeat_interleave(1000)  # up to exp overflow
+    logits = torch.randn(5000, n_objects + 1) * scales[:, None]
+    states = torch.rand(5000, n_objects)
+    k, u = field.project(logits, states)
+    sure, u_ref = _softmax_projection(logits, n_objects, threshold)
+    top2 = torch.softmax(logits, dim=-1)[:, :n_objects].topk(2, dim=-1).values
+    distinct = top2[:, 0] > top2[:, 1]  # the softmax ties objects whose probabilities underflow to 0
+    assert torch.equal(u[distinct], u_ref[distinct]) and float(distinct.float().mean()) > 0.8
+    assert torch.equal(u, logits[:, :n_objects].argmax(dim=-1))  # the logits never tie here
+    probs = top2[:, 0]
+    clear = (probs - threshold).abs() > 1e-5  # rounding may only decide samples on the threshold itself
+    k_ref = torch.where(sure, torch.gather(states, 1, u_ref[:, None])[:, 0], torch.full_like(k, -1.0))
+    assert torch.equal(k[clear], k_ref[clear])
+    assert 0.2 < float((k == -1.0).float().mean()) < 0.8  # both branches are exercised
+
+
+def test_one_state_for_every_ray_gives_the_per_ray_result_and_gradients():
+    torch.manual_seed(1)
+    field = ProbabilityField(ProbabilityConfig(resolution=8, channels=4, hidden=8), n_objects=2)
+    rays, samples = 6, 5
+    pos = torch.rand(rays * samples, 3) * 2 - 1
+    state = torch.tensor([[0.2, 0.9]])
+    shared = field(pos, state.expand(rays, 2))                 # stride 0: folded into the bias
+    per_ray = field(pos, state.repeat(rays, 1))                # one row per ray: added in place
+    per_sample = field(pos, state.repeat(rays * samples, 1))   # one row per sample
+    assert torch.allclose(shared, per_ray, atol=1e-6) and torch.allclose(per_ray, per_sample, atol=1e-6)
+    grads = []
+    for states in (state.expand(rays, 2), state.repeat(rays, 1)):
+        field.zero_grad()
+        field(pos, states).square().sum().backward()
+        grads.append([p.grad.clone() for p in field.parameters()])
+    for a, b in zip(*grads, strict=True):
+        assert torch.allclose(a, b, atol=1e-5)

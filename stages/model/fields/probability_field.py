@@ -40,11 +40,18 @@ class ProbabilityField(nn.Module):
         features = torch.sigmoid(self.encoding(positions, cache))
         first, rest = self.decoder[0], self.decoder[1:]
         c = features.shape[-1]
-        h = F.linear(features, first.weight[:, :c], first.bias)
-        if self.n_objects > 0:
+        n, r = features.shape[0], states.shape[0]
+        if self.n_objects == 0:
+            h = F.linear(features, first.weight[:, :c], first.bias)
+        elif r < n and states.stride(0) == 0:
+            # one state vector for every ray (a rendered view): its term is a constant, folded into the bias
+            h = F.linear(features, first.weight[:, :c], first.bias + F.linear(states[0].to(features.dtype),
+                                                                                first.weight[:, c:]))
+        else:
+            h = F.linear(features, first.weight[:, :c], first.bias)
             hs = F.linear(states.to(h.dtype), first.weight[:, c:])
-            n, r = h.shape[0], hs.shape[0]
-            h = h + hs if r == n else (h.view(r, n // r, -1) + hs[:, None, :]).view(n, -1)
+            # in place: a broadcast add into a new [N, hidden] array costs as much as the layer itself
+            (h if r == n else h.view(r, n // r, -1)).add_(hs if r == n else hs[:, None, :])
         return rest(h).float()
 
     def project(self, logits: torch.Tensor, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -58,9 +65,14 @@ class ProbabilityField(nn.Module):
             z = torch.zeros(logits.shape[0], dtype=torch.long, device=logits.device)
             return torch.full_like(logits[:, 0], self.config.static_value), z
         with torch.no_grad():
-            probs = torch.softmax(logits.float(), dim=-1)[:, : self.n_objects]
-            best, u = probs.max(dim=-1)
+            # classes as rows: reductions over alpha + 1 values per sample are row ops, not a short inner loop
+            # per sample (a softmax over [N, 3] costs 2.5x this on the CPU)
+            rows = logits.detach().float().t().contiguous()
+            best, u = rows[: self.n_objects].max(dim=0)
+            if self.config.rejection_threshold > 0:
+                # softmax_u >= t  <=>  sum_j exp(l_j - l_u) <= 1 / t; overflow gives inf, i.e. "unsure"
+                sure = torch.exp(rows - best).sum(dim=0) <= 1.0 / self.config.rejection_threshold
         k = torch.gather(states, 1, u[:, None])[:, 0]
         if self.config.rejection_threshold > 0:
-            k = torch.where(best >= self.config.rejection_threshold, k, torch.full_like(k, self.config.static_value))
+            k = torch.where(sure, k, torch.full_like(k, self.config.static_value))
         return k, u

@@ -55,10 +55,9 @@ class ConerfModel(LiveSceneModel):
         return masks * (2.0 * states.float() - 1.0)
 
     def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
-                    times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                    times: torch.Tensor) -> torch.Tensor:
         gated = self.gated_attributes(logits, states).to(positions.dtype)
-        k, u = self.probability_field.project(logits, states)
-        return torch.cat([positions, gated], dim=-1), k, u
+        return torch.cat([positions, gated], dim=-1)
 
     def loss_dict(self, out: dict, batch: RayBatch, step: int,
                   language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:

@@ -25,11 +25,10 @@ class KPlanesTimeModel(LiveSceneModel):
         return 4, None
 
     def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
-                    times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(x, y, z, 2 t - 1); ``k`` reports the frame time, ``u`` the probability field's object."""
-        _, u = self.probability_field.project(logits, states)
+                    times: torch.Tensor) -> torch.Tensor:
+        """(x, y, z, 2 t - 1)."""
         t = times.to(positions.dtype)
-        return torch.cat([positions, (2.0 * t - 1.0).unsqueeze(-1)], dim=-1), t, u
+        return torch.cat([positions, (2.0 * t - 1.0).unsqueeze(-1)], dim=-1)
 
 
 register_method("k-planes", KPlanesTimeModel)

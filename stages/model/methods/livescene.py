@@ -90,10 +90,10 @@ class LiveSceneModel(nn.Module):
         return 4, None
 
     def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
-                    times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Field coordinates of samples: (x, y, z, 2 kappa_u - 1). Returns (coords [N, D], k [N], u [N])."""
-        k, u = self.probability_field.project(logits, states)
-        return torch.cat([positions, (2.0 * k - 1.0).unsqueeze(-1).to(positions.dtype)], dim=-1), k, u
+                    times: torch.Tensor) -> torch.Tensor:
+        """Field coordinates [N, D] of samples: (x, y, z, 2 kappa_u - 1)."""
+        k, _ = self.probability_field.project(logits, states)
+        return torch.cat([positions, (2.0 * k - 1.0).unsqueeze(-1).to(positions.dtype)], dim=-1)
 
     # -- states ---------------------------------------------------------------------------------------------
     def ray_states(self, rays: RayBundle) -> torch.Tensor:
@@ -106,8 +106,9 @@ class LiveSceneModel(nn.Module):
         return rays.states.float()
 
     # -- rendering ------------------------------------------------------------------------------------------
-    def _level(self, rays: RayBundle, samples: RaySamples, states: torch.Tensor, final: bool,
+    def _level(self, rays: RayBundle, samples: RaySamples, states: torch.Tensor, level: int, final: bool,
                grad_density: bool, want_rgb: bool = True) -> dict[str, torch.Tensor]:
+        """One sampling level: proposal field ``level`` (or, with ``final``, the radiance field) at ``samples``."""
         n_rays, n_samp = samples.bins.shape[0], samples.n_samples
         mids = samples.mids
         pos = (rays.origins[:, None, :] + rays.directions[:, None, :] * mids[..., None]).reshape(-1, 3)
@@ -120,7 +121,7 @@ class LiveSceneModel(nn.Module):
         grids: PlaneGrids = {}
         # the tri-plane is sampled at box-normalised positions (the reference code forgets to normalise)
         logits = self.probability_field(pos, states, grids)
-        coords, _, _ = self.coordinates(pos, st, logits, t)
+        coords = self.coordinates(pos, st, logits, t)
         out: dict[str, torch.Tensor] = {"logits": logits.view(n_rays, n_samp, -1)}
         if final:
             sigma, geo = self.field.density(coords, grids)
@@ -136,7 +137,7 @@ class LiveSceneModel(nn.Module):
                 out["rgb"] = rgb.view(n_rays, n_samp, 3)
         else:
             with torch.set_grad_enabled(grad_density and torch.is_grad_enabled()):
-                sigma = self.proposal_fields[len(self._levels_done)](coords, grids)
+                sigma = self.proposal_fields[level](coords, grids)
             weights = render_weights(sigma.view(n_rays, n_samp), samples.deltas)
         out["density"], out["weights"] = sigma.view(n_rays, n_samp), weights
         return out
@@ -180,16 +181,17 @@ class LiveSceneModel(nn.Module):
         samples = uniform_samples(rays.nears, rays.fars, cfg.num_proposal_samples[0], training, cfg.single_jitter,
                                   generator) if self.proposal_fields else uniform_samples(
             rays.nears, rays.fars, cfg.num_samples, training, cfg.single_jitter, generator)
-        self._levels_done: list[tuple[RaySamples, dict]] = []
+        # no state on self: threads may render chunks through one model at the same time
+        levels: list[tuple[RaySamples, dict]] = []
         for i in range(len(self.proposal_fields)):
-            lvl = self._level(rays, samples, states, final=False, grad_density=grad_prop)
-            self._levels_done.append((samples, lvl))
+            lvl = self._level(rays, samples, states, i, final=False, grad_density=grad_prop)
+            levels.append((samples, lvl))
             n_next = cfg.num_proposal_samples[i + 1] if i + 1 < len(self.proposal_fields) else cfg.num_samples
             w = lvl["weights"].detach()
             samples = pdf_samples(samples, w.clamp(min=0) ** anneal if anneal != 1.0 else w, n_next, training,
                                   cfg.single_jitter, cfg.histogram_padding, generator)
-        final = self._level(rays, samples, states, final=True, grad_density=True, want_rgb="rgb" in outputs)
-        levels, self._levels_done = self._levels_done, []
+        final = self._level(rays, samples, states, len(levels), final=True, grad_density=True,
+                            want_rgb="rgb" in outputs)
         w = final["weights"]
         out: dict = {"states": states}
         if "rgb" in outputs:

@@ -56,10 +56,9 @@ class MKPlanesModel(LiveSceneModel):
         return 3 + self.info.n_objects, self.plane_pairs()
 
     def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
-                    times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Every object's state is a coordinate; ``k, u`` are the probability field's pick (reporting only)."""
-        k, u = self.probability_field.project(logits, states)
-        return state_coordinates(positions, states), k, u
+                    times: torch.Tensor) -> torch.Tensor:
+        """Every object's state is a coordinate (the probability field does not feed the field)."""
+        return state_coordinates(positions, states)
 
 
 class MKPlanesStarModel(MKPlanesModel):
