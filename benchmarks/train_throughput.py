@@ -17,6 +17,11 @@ CPU (the default: cpu-demo, 2 threads)::
 
     .venv/bin/python benchmarks/train_throughput.py
 
+Ratios between methods on a machine whose speed drifts (``--paired``: every configuration in one process,
+one step of each in turn; the ratio is taken per round)::
+
+    .venv/bin/python benchmarks/train_throughput.py --paired --steps 100
+
 CUDA, paper settings::
 
     .venv/bin/python benchmarks/train_throughput.py --preset gpu-paper --device cuda --rays 4096
@@ -104,6 +109,73 @@ def measure_one(args: argparse.Namespace) -> dict:
     }
 
 
+def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> int:
+    """Every configuration in one process, one step of each in turn: ratios immune to the machine's drift."""
+    import statistics
+
+    import torch
+
+    from stages.model import load_config
+    from stages.model.trainer import Trainer
+
+    settings = {"both": [False, True], "on": [True], "off": [False]}[args.language]
+    configs = list(itertools.product(args.methods, settings))
+    trainers, folders = {}, []
+    for method, lang in configs:
+        overrides = [f"train.threads={args.threads}", "train.eval_every=0", "train.checkpoint_every=0",
+                     f"train.max_steps={args.start_step + args.warmup + args.steps + 10}", *args.overrides]
+        if args.rays:
+            overrides.append(f"train.batch_rays={args.rays}")
+        cfg = load_config(args.preset, overrides, method=method, data=str(dataset),
+                          language_targets=str(targets) if lang else "")
+        folders.append(tempfile.TemporaryDirectory())
+        trainer = Trainer(cfg, folders[-1].name, device=args.device, progress=False)
+        trainer.step = args.start_step
+        trainers[(method, lang)] = trainer
+    cuda = args.device.startswith("cuda")
+
+    def step(trainer: Trainer) -> float:
+        t0 = time.perf_counter()
+        trainer.train_step()
+        trainer.step += 1
+        if cuda:
+            torch.cuda.synchronize()
+        return time.perf_counter() - t0
+
+    for trainer in trainers.values():
+        for _ in range(args.warmup):
+            step(trainer)
+    load0 = os.getloadavg()[0]
+    times: dict[tuple[str, bool], list[float]] = {c: [] for c in configs}
+    for _ in range(args.steps):
+        for c in configs:
+            times[c].append(step(trainers[c]))
+    load1 = os.getloadavg()[0]
+    for f in folders:
+        f.cleanup()
+    print(f"\npaired: {args.device}, {torch.get_num_threads()} threads, preset {args.preset}, {args.steps} rounds "
+          f"of one step per configuration, load {load0:.2f}-{load1:.2f}\n")
+    print("| method | language | step ms (median) | rays/s |")
+    print("|---|---|---|---|")
+    rays = next(iter(trainers.values())).config.train.batch_rays
+    for (method, lang), t in times.items():
+        ms = statistics.median(t) * 1000
+        print(f"| {method} | {'on' if lang else 'off'} | {ms:.1f} | {rays / ms * 1000:.0f} |")
+
+    def ratio(a: tuple[str, bool], b: tuple[str, bool]) -> str:
+        per_round = sorted(x / y for x, y in zip(times[a], times[b], strict=True))
+        q = lambda f: per_round[min(int(f * len(per_round)), len(per_round) - 1)]  # noqa: E731
+        return f"{statistics.median(per_round):.2f}x (rounds' 25-75 %: {q(0.25):.2f}-{q(0.75):.2f})"
+
+    if ("livescene", True) in times and ("livescene", False) in times:
+        print(f"\nlanguage tax (LiveScene on / off), median of per-round ratios: "
+              f"{ratio(('livescene', True), ('livescene', False))}")
+    for base in ("mk-planes", "conerf"):
+        if ("livescene", True) in times and (base, False) in times:
+            print(f"LiveScene with language / {base} without: {ratio(('livescene', True), (base, False))}")
+    return 0
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--methods", nargs="+", default=METHODS)
@@ -120,6 +192,9 @@ def main() -> int:
     p.add_argument("--language", choices=["both", "on", "off"], default="both")
     p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
     p.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "livescene-bench-demo")
+    p.add_argument("--paired", action="store_true",
+                   help="one process, one step of each configuration in turn (step time ratios that the machine's "
+                        "drift does not move; no ops, syncs or peak memory columns)")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--method", help=argparse.SUPPRESS)
     p.add_argument("--dataset", type=Path, help=argparse.SUPPRESS)
@@ -133,6 +208,8 @@ def main() -> int:
     args.work.mkdir(parents=True, exist_ok=True)
     _, dataset = cached_demo_dataset(args.work)
     targets = language_targets(args.work, dataset)
+    if args.paired:
+        return measure_paired(args, dataset, targets)
     settings = {"both": [False, True], "on": [True], "off": [False]}[args.language]
     rows: dict[tuple[str, bool], dict] = {}
     # rounds over every configuration in turn: a burst of load on a shared machine hits one round, and the

@@ -3,8 +3,8 @@
 torch splits each op over its intra-op threads, which pays for large ops only: a render chunk's many small
 ops, and ``grid_sample`` (parallel over the 3 planes of a stack: 2 rounds on 2 threads), leave cores idle.
 Handing whole chunks to worker threads instead keeps every core busy (torch ops release the GIL). Each
-chunk is still computed by one thread in the same order of ops, so results do not depend on which worker
-took it; docs/model.md ("Rendering") has the measurements.
+chunk is still computed by one thread in the same order of ops, so results depend neither on which worker
+took it nor on how many there are; docs/model.md ("Rendering on a CPU") has the measurements.
 """
 
 from __future__ import annotations
@@ -19,12 +19,19 @@ import torch
 T = TypeVar("T")
 
 
-def chunk_bounds(total: int, chunk: int, workers: int) -> list[tuple[int, int]]:
-    """``[start, stop)`` of chunks of at most ``chunk`` items, as many as a multiple of ``workers`` (balanced)."""
+SPLIT = 4
+"""Chunks per render come in multiples of this: balanced on 1, 2 or 4 workers, and the same on every machine."""
+
+
+def chunk_bounds(total: int, chunk: int) -> list[tuple[int, int]]:
+    """``[start, stop)`` of equal chunks of at most ``chunk`` items, as many as a multiple of ``SPLIT``.
+
+    The split does not depend on the number of workers: a chunk's result depends on its size (matrix
+    products block by it), so a render is bit-identical whatever the machine's core count.
+    """
     if total <= 0:
         return []
-    n = math.ceil(total / max(chunk, 1))
-    n = math.ceil(n / workers) * workers if workers > 1 else n
+    n = math.ceil(math.ceil(total / max(chunk, 1)) / SPLIT) * SPLIT
     size = math.ceil(total / n)
     return [(i, min(i + size, total)) for i in range(0, total, size)]
 
@@ -36,7 +43,7 @@ def map_chunks(fn: Callable[[int, int], T], total: int, chunk: int, workers: int
     inference mode (both are thread-local in torch). The caller's thread count
     is restored afterwards.
     """
-    bounds = chunk_bounds(total, chunk, workers)
+    bounds = chunk_bounds(total, chunk)
     if workers <= 1 or len(bounds) <= 1:
         return [fn(a, b) for a, b in bounds]
     grad, inference = torch.is_grad_enabled(), torch.is_inference_mode_enabled()

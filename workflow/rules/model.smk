@@ -22,10 +22,13 @@ rule train:
         eval_every=config["train"]["eval_every"],
         seed=config["seed"],
         device=config["device"],
-    threads: 2
+        # the configured count, not {threads}: Snakemake scales that down to --cores, and torch's reductions (so the
+        # weights) depend on the thread count
+        torch_threads=config["train"]["threads"],
+    threads: config["train"]["threads"]
     resources:
         mem_mb=8000,
-        # minutes: a cpu-demo step takes ~0.1 s on 2 cores; a time budget caps it
+        # minutes: a cpu-demo step takes ~0.1 s on one core; a time budget caps it
         runtime=int(min(config["train"]["steps"] * 0.5, config["train"]["max_seconds"] or 1e9) / 60) + 15,
         gpu=config["gpus"],
     conda:
@@ -33,4 +36,4 @@ rule train:
     shell:
         "{params.cli} train --data {input.data} --method {wildcards.method} --preset {params.preset}"
         " --out {params.run} --resume --max-steps {params.steps} --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
-        " --set train.threads={threads} --set train.eval_every={params.eval_every} {params.args} --no-progress > {log} 2>&1"
+        " --set train.threads={params.torch_threads} --set train.eval_every={params.eval_every} {params.args} --no-progress > {log} 2>&1"
