@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from stages.cli import available
-from stages.viewer.cli import main
+from stages.viewer.cli import CPU_CHUNK_RAYS, main
 from stages.viewer.viser_dependency import VISER_VERSION, install_command
 
 
@@ -57,7 +57,7 @@ def test_the_viewer_finds_the_runs_language_table(monkeypatch, viewer_scene, bag
         assert viewer.language.renders_language and viewer.language.run_encoder == bag_encoder.name
         assert viewer.language.sources() == ["probs", "language", "language_objects"]
         viewer.language.check_source("language")  # queries embedded like the targets: accepted
-        assert viewer.options.full_pixels == 128 * 96 and viewer.options.chunk_rays == 2048
+        assert viewer.options.full_pixels == 128 * 96 and viewer.options.chunk_rays == CPU_CHUNK_RAYS
     finally:
         viewer.stop()
 
