@@ -19,6 +19,9 @@ import torch
 T = TypeVar("T")
 
 
+MAX_WORKERS = 16
+"""Worker threads at most: each holds a chunk's intermediate arrays (~100 MiB at 4096 rays of cpu-demo), so a
+many-core machine does not multiply that by its core count."""
 SPLIT = 4
 """Chunks per render come in multiples of this: balanced on 1, 2 or 4 workers, and the same on every machine."""
 
@@ -37,13 +40,14 @@ def chunk_bounds(total: int, chunk: int) -> list[tuple[int, int]]:
 
 
 def map_chunks(fn: Callable[[int, int], T], total: int, chunk: int, workers: int) -> list[T]:
-    """``fn(start, stop)`` over the chunks of ``range(total)``, in order, on ``workers`` threads.
+    """``fn(start, stop)`` over the chunks of ``range(total)``, in order, on ``workers`` threads (at most MAX_WORKERS).
 
     Workers run torch ops on one thread each and inherit the caller's grad and
     inference mode (both are thread-local in torch). The caller's thread count
     is restored afterwards.
     """
     bounds = chunk_bounds(total, chunk)
+    workers = min(workers, MAX_WORKERS, len(bounds))
     if workers <= 1 or len(bounds) <= 1:
         return [fn(a, b) for a, b in bounds]
     grad, inference = torch.is_grad_enabled(), torch.is_inference_mode_enabled()

@@ -49,6 +49,22 @@ def test_map_chunks_keeps_order_grad_mode_and_thread_count():
     assert seen[-1][:2] == (False, False)
 
 
+def test_map_chunks_caps_its_workers(monkeypatch):
+    import threading
+
+    from stages.model import chunk_threads
+
+    monkeypatch.setattr(chunk_threads, "MAX_WORKERS", 3)
+    names = set()
+
+    def fn(a: int, b: int) -> int:
+        names.add(threading.current_thread().name)
+        return b - a
+
+    assert sum(map_chunks(fn, 1000, 10, 64)) == 1000
+    assert 1 <= len(names) <= 3
+
+
 def test_map_chunks_raises_a_worker_error():
     def fn(a: int, b: int) -> int:
         if a > 0:
