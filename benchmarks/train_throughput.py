@@ -54,20 +54,42 @@ def language_targets(work: Path, dataset: Path) -> Path:
     return out
 
 
-def measure_one(args: argparse.Namespace) -> dict:
-    """Runs in the child process: one method, one language setting."""
-    import torch
+LANGUAGE_SETTINGS = {"both": [False, True], "on": [True], "off": [False]}
+"""--language -> the language settings measured per method."""
 
+
+def bench_config(args: argparse.Namespace, method: str, with_language: bool, dataset: Path, targets: Path):
+    """The run config of one measured configuration: the preset, no evaluation or checkpoints, enough steps."""
     from stages.model import load_config
-    from stages.model.step_counters import count_host_syncs, count_torch_ops
-    from stages.model.trainer import Trainer
 
     overrides = [f"train.threads={args.threads}", "train.eval_every=0", "train.checkpoint_every=0",
                  f"train.max_steps={args.start_step + args.warmup + args.steps + 10}", *args.overrides]
     if args.rays:
         overrides.append(f"train.batch_rays={args.rays}")
-    cfg = load_config(args.preset, overrides, method=args.method, data=str(args.dataset),
-                      language_targets=str(args.targets) if args.language else "")
+    return load_config(args.preset, overrides, method=method, data=str(dataset),
+                       language_targets=str(targets) if with_language else "")
+
+
+def print_ratios(ratio) -> None:
+    """The issue's two step-time ratios; ``ratio(a, b)`` formats a / b of two (method, language) keys, or None."""
+    pairs = [("language tax (LiveScene on / off)", ("livescene", True), ("livescene", False))]
+    pairs += [(f"LiveScene with language / {base} without", ("livescene", True), (base, False))
+              for base in ("mk-planes", "conerf")]
+    print()
+    for label, a, b in pairs:
+        text = ratio(a, b)
+        if text is not None:
+            print(f"{label}: {text}")
+
+
+def measure_one(args: argparse.Namespace) -> dict:
+    """Runs in the child process: one method, one language setting."""
+    import torch
+
+    from stages.model.step_counters import count_host_syncs, count_torch_ops
+    from stages.model.trainer import Trainer
+
+    cfg = bench_config(args, args.method, args.language, args.dataset, args.targets)
     with tempfile.TemporaryDirectory() as out:
         trainer = Trainer(cfg, out, device=args.device, progress=False)
         device = trainer.device
@@ -115,21 +137,14 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
 
     import torch
 
-    from stages.model import load_config
     from stages.model.trainer import Trainer
 
-    settings = {"both": [False, True], "on": [True], "off": [False]}[args.language]
-    configs = list(itertools.product(args.methods, settings))
+    configs = list(itertools.product(args.methods, LANGUAGE_SETTINGS[args.language]))
     trainers, folders = {}, []
     for method, lang in configs:
-        overrides = [f"train.threads={args.threads}", "train.eval_every=0", "train.checkpoint_every=0",
-                     f"train.max_steps={args.start_step + args.warmup + args.steps + 10}", *args.overrides]
-        if args.rays:
-            overrides.append(f"train.batch_rays={args.rays}")
-        cfg = load_config(args.preset, overrides, method=method, data=str(dataset),
-                          language_targets=str(targets) if lang else "")
         folders.append(tempfile.TemporaryDirectory())
-        trainer = Trainer(cfg, folders[-1].name, device=args.device, progress=False)
+        trainer = Trainer(bench_config(args, method, lang, dataset, targets), folders[-1].name, device=args.device,
+                          progress=False)
         trainer.step = args.start_step
         trainers[(method, lang)] = trainer
     cuda = args.device.startswith("cuda")
@@ -162,17 +177,15 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
         ms = statistics.median(t) * 1000
         print(f"| {method} | {'on' if lang else 'off'} | {ms:.1f} | {rays / ms * 1000:.0f} |")
 
-    def ratio(a: tuple[str, bool], b: tuple[str, bool]) -> str:
+    def ratio(a: tuple[str, bool], b: tuple[str, bool]) -> str | None:
+        if a not in times or b not in times:
+            return None
         per_round = sorted(x / y for x, y in zip(times[a], times[b], strict=True))
         q = lambda f: per_round[min(int(f * len(per_round)), len(per_round) - 1)]  # noqa: E731
-        return f"{statistics.median(per_round):.2f}x (rounds' 25-75 %: {q(0.25):.2f}-{q(0.75):.2f})"
+        return (f"{statistics.median(per_round):.2f}x (median of per-round ratios; 25-75 %: "
+                f"{q(0.25):.2f}-{q(0.75):.2f})")
 
-    if ("livescene", True) in times and ("livescene", False) in times:
-        print(f"\nlanguage tax (LiveScene on / off), median of per-round ratios: "
-              f"{ratio(('livescene', True), ('livescene', False))}")
-    for base in ("mk-planes", "conerf"):
-        if ("livescene", True) in times and (base, False) in times:
-            print(f"LiveScene with language / {base} without: {ratio(('livescene', True), (base, False))}")
+    print_ratios(ratio)
     return 0
 
 
@@ -210,7 +223,7 @@ def main() -> int:
     targets = language_targets(args.work, dataset)
     if args.paired:
         return measure_paired(args, dataset, targets)
-    settings = {"both": [False, True], "on": [True], "off": [False]}[args.language]
+    settings = LANGUAGE_SETTINGS[args.language]
     rows: dict[tuple[str, bool], dict] = {}
     # rounds over every configuration in turn: a burst of load on a shared machine hits one round, and the
     # fastest round's median is kept for each configuration
@@ -240,11 +253,7 @@ def main() -> int:
         print(f"| {r['method']} | {lang} | {r['step_ms']} | {r['rays_per_s']} | {r['ops']} | {r['syncs']} | "
               f"{r['peak_mib']} | {load} |")
     by = {(r["method"], r["language"]): r["step_ms"] for r in rows}
-    if ("livescene", True) in by and ("livescene", False) in by:
-        print(f"\nlanguage tax (LiveScene on / off): {by[('livescene', True)] / by[('livescene', False)]:.2f}x")
-    for base in ("mk-planes", "conerf"):
-        if ("livescene", True) in by and (base, False) in by:
-            print(f"LiveScene with language / {base} without: {by[('livescene', True)] / by[(base, False)]:.2f}x")
+    print_ratios(lambda a, b: f"{by[a] / by[b]:.2f}x" if a in by and b in by else None)
     return 0
 
 

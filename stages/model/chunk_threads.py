@@ -48,7 +48,7 @@ def map_chunks(fn: Callable[[int, int], T], total: int, chunk: int, workers: int
     """
     bounds = chunk_bounds(total, chunk)
     workers = min(workers, MAX_WORKERS, len(bounds))
-    if workers <= 1 or len(bounds) <= 1:
+    if workers <= 1:
         return [fn(a, b) for a, b in bounds]
     grad, inference = torch.is_grad_enabled(), torch.is_inference_mode_enabled()
     previous = torch.get_num_threads()

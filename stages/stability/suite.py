@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import pytest
 
@@ -81,32 +82,19 @@ def run_suite(cases: list[str] | None = None, groups: list[str] | None = None, *
                            paths=paths, collect_only=collect_only, extra=extra)
         # stdout carries the table: pytest's progress and tracebacks go to stderr (the workflow's log)
         stack.enter_context(contextlib.redirect_stdout(sys.stderr))
-        stack.enter_context(_env(PYTEST_DISABLE_PLUGIN_AUTOLOAD="1", PYTEST_ADDOPTS=None))
+        # plugins installed beside pytest (auto-loaded through entry points) and PYTEST_ADDOPTS would change what
+        # runs, in which order and with which options; the checks need neither (the environment is put back after)
+        stack.enter_context(mock.patch.dict(os.environ, {"PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"}))
+        os.environ.pop("PYTEST_ADDOPTS", None)
         code = int(pytest.main(args, plugins=[collector]))
     return SuiteRun(collector.summary(), code, collector.error, collector.collected)
 
 
-@contextlib.contextmanager
-def _env(**values: str | None):
-    """Set (or, for None, remove) environment variables for the duration of the run.
-
-    Plugins installed beside pytest (auto-loaded through entry points) and PYTEST_ADDOPTS would change
-    what runs, in which order and with which options; the checks need neither.
-    """
-    saved = {k: os.environ.get(k) for k in values}
-    try:
-        for k, v in values.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+def _metric_or_reason(row: dict[str, Any]) -> str:
+    """A row's metric when it passed, else the last line of why not."""
+    if row["result"] == "pass":
+        return row["metric"]
+    return row["detail"].splitlines()[-1] if row["detail"] else "-"
 
 
 def format_table(rows: list[dict[str, Any]], width: int = 100) -> str:
@@ -114,7 +102,7 @@ def format_table(rows: list[dict[str, Any]], width: int = 100) -> str:
     name_w = max([len("case"), *(len(r["name"]) for r in rows)])
     lines = [f"{'case'.ljust(name_w)} | result | metric", f"{'-' * name_w}-|--------|-{'-' * 40}"]
     for r in rows:
-        text = r["metric"] if r["result"] == "pass" else r["detail"].splitlines()[-1] if r["detail"] else "-"
+        text = _metric_or_reason(r)
         if len(text) > width:
             text = text[: width - 3] + "..."
         lines.append(f"{r['name'].ljust(name_w)} | {r['result'].ljust(6)} | {text}")
@@ -125,6 +113,6 @@ def format_markdown(rows: list[dict[str, Any]]) -> str:
     """The same table in Markdown (docs/stability.md, the report): case | group | result | metric or reason."""
     lines = ["| case | group | result | metric (pass) or reason |", "|---|---|---|---|"]
     for r in rows:
-        text = r["metric"] if r["result"] == "pass" else (r["detail"].splitlines()[-1] if r["detail"] else "-")
+        text = _metric_or_reason(r)
         lines.append(f"| {r['name']} | {r['group']} | {r['result']} | {text.replace('|', '/')} |")
     return "\n".join(lines)

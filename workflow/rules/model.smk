@@ -28,7 +28,7 @@ rule train:
     threads: config["train"]["threads"]
     resources:
         mem_mb=8000,
-        # minutes: a cpu-demo step takes ~0.1 s on one core; a time budget caps it
+        # minutes: a cpu-demo step takes ~0.1 s on 2 cores; a time budget caps it
         runtime=int(min(config["train"]["steps"] * 0.5, config["train"]["max_seconds"] or 1e9) / 60) + 15,
         gpu=config["gpus"],
     conda:

@@ -41,14 +41,11 @@ class ProbabilityField(nn.Module):
         first, rest = self.decoder[0], self.decoder[1:]
         c = features.shape[-1]
         n, r = features.shape[0], states.shape[0]
-        if self.n_objects == 0:
-            h = F.linear(features, first.weight[:, :c], first.bias)
-        elif r < n and states.stride(0) == 0:
-            # one state vector for every ray (a rendered view): its term is a constant, folded into the bias
-            h = F.linear(features, first.weight[:, :c], first.bias + F.linear(states[0].to(features.dtype),
-                                                                                first.weight[:, c:]))
-        else:
-            h = F.linear(features, first.weight[:, :c], first.bias)
+        # one state vector for every ray (a rendered view): its term is a constant, folded into the bias
+        shared = self.n_objects > 0 and r < n and states.stride(0) == 0
+        bias = first.bias + F.linear(states[0].to(features.dtype), first.weight[:, c:]) if shared else first.bias
+        h = F.linear(features, first.weight[:, :c], bias)
+        if self.n_objects > 0 and not shared:
             hs = F.linear(states.to(h.dtype), first.weight[:, c:])
             # in place: a broadcast add into a new [N, hidden] array costs as much as the layer itself
             (h if r == n else h.view(r, n // r, -1)).add_(hs if r == n else hs[:, None, :])
