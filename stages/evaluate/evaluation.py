@@ -20,15 +20,16 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from stages.scene import Camera, Frame, InputError, SceneDataset, atomic_dir, write_json
+from stages.scene import Camera, Frame, InputError, SceneDataset, SceneError, atomic_dir, write_json
 
 from .locality import locality
 from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
 from .unseen_states import unseen_combinations
 
-EVALUATE_VERSION = 2
-"""2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames."""
+EVALUATE_VERSION = 3
+"""2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames.
+3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``)."""
 
 
 @dataclass
@@ -139,6 +140,7 @@ class Evaluator:
         # a learned-state run renders a held-out frame at the state it learned for that frame index
         # (docs/method.md section 6)
         learned = getattr(self.run, "state_mode", "given") == "learned"
+        regions = self._region_source()
         for frame in tqdm(frames, desc="held-out views", unit="view"):
             gt = self._image(frame)
             t0 = time.perf_counter()
@@ -148,6 +150,8 @@ class Evaluator:
             rec = {"frame": frame.frame_id, "file_path": frame.file_path, "psnr": _finite_or_none(psnr(rgb, gt)),
                    "ssim": ssim(rgb, gt), "lpips": lpips(rgb, gt) if lpips.available else None,
                    "state": frame.state}
+            if regions:
+                rec.update(self._region_psnr(frame, rgb, gt))
             records.append(rec)
             kept.append((frame, {k: v for k, v in out.items() if k in ("probs", "language")}))
             if out_dir is not None and self.config.save_renders:
@@ -160,6 +164,9 @@ class Evaluator:
             "ssim_form": SSIM_FORM,
             "lpips": summarize([r["lpips"] for r in records]) if lpips.available else None,
             "lpips_status": lpips.status,
+            "psnr_objects": summarize([r.get("psnr_objects") for r in records]),
+            "psnr_static": summarize([r.get("psnr_static") for r in records]),
+            "region_source": regions or "none: the dataset has no masks and no truth capture was given",
             "image_size": [cam.width, cam.height],
             "state_source": "run's learned state at the frame index" if learned
             else "dataset per-frame state" if all(f.state for f in frames)
@@ -168,6 +175,27 @@ class Evaluator:
         self.timings["held_out"] = {"render_seconds": render_seconds, "views": len(frames),
                                     "fps": len(frames) / render_seconds if render_seconds > 0 else None}
         return summary, kept
+
+    def _region_source(self) -> str:
+        """Where the object / static split of the held-out PSNR comes from ('' when nothing gives it)."""
+        if not self.ds.objects:
+            return ""
+        return "dataset masks" if self.ds.has_masks else "truth renderer" if self.truth is not None else ""
+
+    def _region_psnr(self, frame: Frame, rgb: np.ndarray, gt: np.ndarray) -> dict[str, float | None]:
+        """PSNR over the pixels of any object and over the rest (static), by the frame's object masks.
+
+        Splits the held-out error between what the state drives and what it should not touch; a frame
+        whose mask file is missing gets None for both.
+        """
+        try:
+            masks = self._grounding_masks([frame])
+        except SceneError:
+            return {"psnr_objects": None, "psnr_static": None}
+        assert masks is not None
+        objects = masks[0][..., :-1].any(axis=-1)
+        return {"psnr_objects": _finite_or_none(psnr(rgb, gt, objects)) if objects.any() else None,
+                "psnr_static": _finite_or_none(psnr(rgb, gt, ~objects)) if not objects.all() else None}
 
     # -- 2. unseen state combinations -----------------------------------------------------------------------
     def unseen(self, out_dir: Path | None) -> dict[str, Any]:

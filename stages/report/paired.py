@@ -27,11 +27,12 @@ def _finite(value: Any) -> float | None:
     return value if value == value and abs(value) != float("inf") else None
 
 
-def held_out_items(metrics: dict | None) -> Items:
-    """Held-out PSNR per view, keyed by frame id."""
+def held_out_items(metrics: dict | None, key: str = "psnr") -> Items:
+    """Held-out PSNR per view, keyed by frame id; ``key`` "psnr_objects" / "psnr_static" takes the PSNR over
+    object pixels / the other pixels (evaluations before EVALUATE_VERSION 3 have neither: no items)."""
     out: Items = {}
     for v in ((metrics or {}).get("held_out") or {}).get("views") or []:
-        value = _finite(v.get("psnr"))
+        value = _finite(v.get(key))
         if value is not None:
             out[(str(v.get("frame")),)] = value
     return out
@@ -101,6 +102,11 @@ class MetricSpec:
 
 METRICS = [
     MetricSpec("held_out_psnr", "held-out PSNR per view", "dB", held_out_items),
+    # where the held-out difference lies: in what the states drive, or in what they should leave alone
+    MetricSpec("held_out_psnr_objects", "held-out PSNR per view, object pixels", "dB",
+               lambda m: held_out_items(m, "psnr_objects")),
+    MetricSpec("held_out_psnr_static", "held-out PSNR per view, static pixels (no object)", "dB",
+               lambda m: held_out_items(m, "psnr_static")),
     MetricSpec("unseen_psnr", "unseen-combination PSNR per (view, state vector)", "dB", unseen_items),
     MetricSpec("grounding_iou", "grounding IoU (probs) per (query, view)", "", grounding_items),
     MetricSpec("locality_outside", "change outside the moved object's swept region per (view, object), lower "

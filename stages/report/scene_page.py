@@ -200,7 +200,7 @@ def section_methods(sd: SceneData) -> str:
     flags = scene_trust(sd)
     for m in sd.methods:
         if m.run is None and m.metrics is None:
-            rows.append([escape(m.name)] + [escape(_why_skipped(sd, f"train[{m.name}]"))] + [None] * 10)
+            rows.append([escape(m.name)] + [escape(_why_skipped(sd, f"train[{m.name}]"))] + [None] * 12)
             continue
         lpips = _metric(m, "held_out", "lpips", "mean")
         lpips_cell = fmt(lpips) if lpips is not None else escape(
@@ -210,19 +210,23 @@ def section_methods(sd: SceneData) -> str:
         grounding = _metric(m, "grounding", "miou_probs")
         fps = ((m.timings or {}).get("held_out") or {}).get("fps")  # wall clock: timings.json, not metrics.json
         rows.append([escape(m.name), _flag_html(flags.get(m.name)), _metric(m, "held_out", "psnr", "mean"),
+                     _metric(m, "held_out", "psnr_objects", "mean"), _metric(m, "held_out", "psnr_static", "mean"),
                      _metric(m, "held_out", "ssim", "mean"),
                      lpips_cell, _metric(m, "unseen_combinations", "psnr", "mean"),
                      grounding if isinstance(grounding, (int, float)) else None,
                      params, run.get("peak_memory_mib"), run.get("train_seconds"), run.get("steps"),
                      fps if isinstance(fps, (int, float)) else None])
     return ("<p>Held-out views of the test split; unseen combinations and grounding need truth and names. "
+            "PSNR objects / static: the same views' PSNR over the pixels of any object mask and over the rest "
+            "(what the states drive, and what they should leave alone). "
             "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
             "not complete is flagged, and its numbers are not results. "
             + _ssim_form(sd) + "</p>"
             + _flag_banner(flags)
-            + table(["method", "trust", "PSNR dB", "SSIM", "LPIPS", "unseen PSNR dB", "grounding mIoU (probs)",
-                     "parameters", "peak memory MiB", "train s", "steps", "render fps"], rows))
+            + table(["method", "trust", "PSNR dB", "PSNR objects dB", "PSNR static dB", "SSIM", "LPIPS",
+                     "unseen PSNR dB", "grounding mIoU (probs)", "parameters", "peak memory MiB", "train s",
+                     "steps", "render fps"], rows))
 
 
 def scene_verdict(sd: SceneData, flags: dict[str, TrustFlag] | None = None) -> list[PairedResult]:

@@ -67,7 +67,7 @@ class FakeRun:
             base = self.ds.load_image(frame).astype(np.float64)
         else:
             base = self.truth.render(c2w, states)["rgb"].astype(np.float64)
-        probs = label_map_to_onehot(np.array([[0, -1, 1][i] for i in ids_map().ravel()]).reshape(H, W), 2)
+        probs = label_map_to_onehot(np.array([[-1, 0, 1][i] for i in ids_map().ravel()]).reshape(H, W), 2)
         return {"rgb": base + _checker(), "depth": np.ones((H, W)), "accumulation": np.ones((H, W)),
                 "probs": probs.astype(np.float32)}
 
@@ -78,7 +78,7 @@ def make_eval_dataset(root: Path, n_frames: int = 8) -> SceneDataset:
     camera = Camera(fx=20.0, fy=20.0, cx=W / 2, cy=H / 2, width=W, height=H)
     (root / "images").mkdir(parents=True, exist_ok=True)
     frames = []
-    labels = np.array([[0, -1, 1][i] for i in ids_map().ravel()]).reshape(H, W)
+    labels = np.array([[-1, 0, 1][i] for i in ids_map().ravel()]).reshape(H, W)
     for i in range(n_frames):
         t = i / (n_frames - 1)
         state = {"fridge": t, "drawer": t}

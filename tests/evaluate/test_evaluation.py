@@ -35,6 +35,12 @@ def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
         assert 0 < v["ssim"] < 1
     assert held["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
     assert held["psnr"]["std"] == pytest.approx(0.0, abs=1e-9)
+    # the error lies on the fridge, half of the object pixels; static pixels are exact (infinite PSNR: None)
+    assert held["region_source"] == "dataset masks"
+    for v in held["views"]:
+        assert v["psnr_objects"] == pytest.approx(10 * math.log10(1 / (ERROR**2 * 6 / 12)), abs=1e-6)
+        assert v["psnr_static"] is None
+    assert held["psnr_objects"]["n"] == 4 and held["psnr_static"]["n"] == 0
     assert held["image_size"] == [16, 12]
     assert held["lpips"] is None or held["lpips_status"].startswith("computed")
     # each held-out view was rendered at its own state and frame index

@@ -76,6 +76,25 @@ def test_items_are_matched_by_frame_state_vector_and_query():
     assert paired_difference(grounding_items(a), grounding_items(b))[:2] == (1, pytest.approx(0.1))
 
 
+def test_held_out_difference_is_split_into_object_and_static_pixels():
+    def views(rows: dict[str, tuple[float, float]]) -> dict:
+        return {"held_out": {"views": [{"frame": f, "psnr": 0.5 * (o + s), "psnr_objects": o, "psnr_static": s}
+                                       for f, (o, s) in rows.items()]}}
+
+    ours = views({"0": (24.0, 27.0), "2": (25.0, 26.0), "4": (23.0, 28.8)})
+    theirs = views({"0": (22.0, 27.5), "2": (23.5, 26.6), "4": (21.0, 29.5)})
+    rows = {r.metric: r for r in compare({"livescene": ours, "mk-planes": theirs}, {})}
+    assert rows["held_out_psnr_objects"].n == 3 and rows["held_out_psnr_objects"].mean == pytest.approx(5.5 / 3)
+    assert rows["held_out_psnr_objects"].verdict == "LiveScene ahead"
+    assert rows["held_out_psnr_static"].mean == pytest.approx(-0.6)
+    assert rows["held_out_psnr_static"].verdict == "LiveScene behind"
+    # an evaluation older than the split has no such items: no verdict, and the whole-image one stays
+    old = {"held_out": {"views": [{"frame": f, "psnr": v["psnr"]} for f, v in
+                                  zip("024", theirs["held_out"]["views"], strict=True)]}}
+    rows = {r.metric: r for r in compare({"livescene": ours, "mk-planes": old}, {})}
+    assert rows["held_out_psnr_static"].verdict == "no paired items" and rows["held_out_psnr"].n == 3
+
+
 def test_older_grounding_without_frames_pairs_only_on_the_same_views():
     a = _metrics(views={"0": 20.0, "2": 20.0}, ious={"door": ([0.5, 0.9], None)})
     b = _metrics(views={"0": 20.0, "2": 20.0}, ious={"door": ([0.4, 0.8], None)})
