@@ -92,6 +92,8 @@ class Evaluator:
         self.config = config or EvaluateConfig()
         self.timings: dict[str, Any] = {}
         """Wall-clock numbers of the last evaluation (timings.json), kept out of the metrics."""
+        self._masks: dict[str, np.ndarray] = {}
+        """Object masks by frame id: loaded (or truth-rendered) once for the region split and the grounding."""
         run_objects = list(getattr(run, "objects", dataset.objects))
         if run_objects != list(dataset.objects):
             raise InputError(dataset.root / "mapping.yaml", f"the run's objects {run_objects} differ from the "
@@ -140,7 +142,7 @@ class Evaluator:
         # a learned-state run renders a held-out frame at the state it learned for that frame index
         # (docs/method.md section 6)
         learned = getattr(self.run, "state_mode", "given") == "learned"
-        regions = self._region_source()
+        regions = self._mask_source() if self.ds.objects else ""
         for frame in tqdm(frames, desc="held-out views", unit="view"):
             gt = self._image(frame)
             t0 = time.perf_counter()
@@ -176,12 +178,6 @@ class Evaluator:
                                     "fps": len(frames) / render_seconds if render_seconds > 0 else None}
         return summary, kept
 
-    def _region_source(self) -> str:
-        """Where the object / static split of the held-out PSNR comes from ('' when nothing gives it)."""
-        if not self.ds.objects:
-            return ""
-        return "dataset masks" if self.ds.has_masks else "truth renderer" if self.truth is not None else ""
-
     def _region_psnr(self, frame: Frame, rgb: np.ndarray, gt: np.ndarray) -> dict[str, float | None]:
         """PSNR over the pixels of any object and over the rest (static), by the frame's object masks.
 
@@ -189,11 +185,9 @@ class Evaluator:
         whose mask file is missing gets None for both.
         """
         try:
-            masks = self._grounding_masks([frame])
+            objects = self._object_masks(frame)[..., :-1].any(axis=-1)
         except SceneError:
             return {"psnr_objects": None, "psnr_static": None}
-        assert masks is not None
-        objects = masks[0][..., :-1].any(axis=-1)
         return {"psnr_objects": _finite_or_none(psnr(rgb, gt, objects)) if objects.any() else None,
                 "psnr_static": _finite_or_none(psnr(rgb, gt, ~objects)) if not objects.all() else None}
 
@@ -341,21 +335,31 @@ class Evaluator:
                 [q[source]["iou"]["mean"] for q in results["queries"] if q[source]["iou"]["mean"] is not None])["mean"]
         return results
 
+    def _mask_source(self) -> str:
+        """Where the object masks come from: "dataset masks", "truth renderer", or "" (nowhere)."""
+        return "dataset masks" if self.ds.has_masks else "truth renderer" if self.truth is not None else ""
+
+    def _object_masks(self, frame: Frame) -> np.ndarray:
+        """Object masks ``[H, W, alpha + 1]`` of a frame at the render scale, from ``_mask_source`` (memoised)."""
+        if frame.frame_id not in self._masks:
+            if self.ds.has_masks:
+                mask = self._mask(frame)
+            else:
+                assert self.truth is not None, "no mask source (see _mask_source)"
+                cam = self._camera(frame)
+                ids = self.truth.renderer.render(self.truth.pose_for(frame)[0], self.truth.state_for(frame) or {},
+                                                 camera=self.truth.camera_for(cam.width, cam.height))["ids"]
+                chans = [ids == self.truth.object_ids.get(o, -1) for o in self.ds.objects]
+                chans.append(~np.any(chans, axis=0))
+                mask = np.stack(chans, axis=-1)
+            self._masks[frame.frame_id] = mask
+        return self._masks[frame.frame_id]
+
     def _grounding_masks(self, frames: list[Frame]) -> list[np.ndarray] | None:
         """Truth object masks ``[H, W, alpha + 1]`` per frame: the dataset's masks, else the truth renderer's ids."""
-        if self.ds.has_masks:
-            return [self._mask(f) for f in frames]
-        if self.truth is None:
+        if not self._mask_source():
             return None
-        out = []
-        for f in frames:
-            cam = self._camera(f)
-            ids = self.truth.renderer.render(self.truth.pose_for(f)[0], self.truth.state_for(f) or {},
-                                             camera=self.truth.camera_for(cam.width, cam.height))["ids"]
-            chans = [ids == self.truth.object_ids.get(o, -1) for o in self.ds.objects]
-            chans.append(~np.any(chans, axis=0))
-            out.append(np.stack(chans, axis=-1))
-        return out
+        return [self._object_masks(f) for f in frames]
 
     # -- 4. locality ----------------------------------------------------------------------------------------
     def locality(self) -> dict[str, Any]:
