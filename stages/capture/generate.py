@@ -14,6 +14,7 @@ Layout (see docs/captures.md and the file contracts)::
     truth/images/frame_*.png    lossless frames (the video's source), when write_truth_images
     truth/scene.json            scene box, units, joints, lights
     truth/spec.yaml             the full spec: TruthRenderer rebuilds the scene from it
+    truth/texture_atlas.npz     the surface textures with the inputs they came from (a cache for truth renders)
 """
 
 from __future__ import annotations
@@ -33,9 +34,10 @@ from stages.scene import atomic_dir
 from stages.scene.transforms import camera_to_dict
 
 from .camera_path import camera_path, seeded_rng
-from .renderer import SceneRenderer
+from .renderer import ATLAS_FILE, SceneRenderer
 from .spec import CaptureSpec, spec_to_dict
 from .state_schedule import state_table
+from .textures import atlas_key, save_atlas
 
 GENERATOR_VERSION = "1"
 
@@ -146,6 +148,9 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
             w.writerows(rows)
         (truth / "scene.json").write_text(json.dumps(scene_info(spec, renderer), indent=1) + "\n")
         (truth / "spec.yaml").write_text(yaml.safe_dump(spec_to_dict(spec), sort_keys=False))
+        r = spec.render
+        save_atlas(truth / ATLAS_FILE, renderer.atlas,
+                   atlas_key(renderer.model.materials, spec.seed, r.texture_size, r.contrast))
 
         (tmp / "mapping.yaml").write_text(yaml.safe_dump({k: n for k, n in enumerate(names, start=1)}))
         (tmp / "key_frame_value.yaml").write_text(

@@ -19,19 +19,22 @@ from stages.scene.transforms import camera_from_dict
 
 from .geometry import FACE_AXES, FACE_UV_AXES, SceneModel, build_scene
 from .spec import CaptureSpec, CaptureSpecError, spec_from_dict
-from .textures import sample_atlas, texture_atlas
+from .textures import cached_atlas, sample_atlas
 
+ATLAS_FILE = "texture_atlas.npz"
+"""The capture's texture atlas, in ``truth/``: a cache, regenerated from the spec where missing or stale."""
 SHADOW_EPS = 1e-3  # metres; lifts shadow-ray origins off the surface to avoid self-hits
 
 
 class SceneRenderer:
     """Renders one spec; rebuilds the ray-casting scene only when the states change."""
 
-    def __init__(self, spec: CaptureSpec) -> None:
+    def __init__(self, spec: CaptureSpec, atlas_file: Path | None = None) -> None:
+        """``atlas_file``: a texture atlas cached by the capture stage (used when it matches the spec)."""
         self.spec = spec
         self.model: SceneModel = build_scene(spec)
         r = spec.render
-        self.atlas = texture_atlas(self.model.materials, spec.seed, r.texture_size, r.contrast)
+        self.atlas = cached_atlas(atlas_file, self.model.materials, spec.seed, r.texture_size, r.contrast)
         rng = np.random.default_rng([spec.seed, 7])
         # a random texture offset per part and face, so no two faces show the same patch
         self.face_offsets = rng.uniform(0, r.texture_size, size=(len(self.model.parts), 6, 2))
@@ -177,7 +180,7 @@ class TruthRenderer(SceneRenderer):
     """The renderer of a generated capture, rebuilt from ``truth/spec.yaml``; cameras from the truth poses."""
 
     def __init__(self, spec: CaptureSpec, capture_dir: Path | None = None, camera: Camera | None = None) -> None:
-        super().__init__(spec)
+        super().__init__(spec, capture_dir / "truth" / ATLAS_FILE if capture_dir is not None else None)
         self.capture_dir = capture_dir
         if camera is not None:
             self.camera = camera

@@ -11,12 +11,22 @@ a seed.
 
 from __future__ import annotations
 
+import json
+import logging
+import zipfile
+from pathlib import Path
+
 import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from .camera_path import seeded_rng
 from .geometry import Material
+
+TEXTURE_CODE_VERSION = "1"
+"""Bump whenever ``make_texture``'s output changes: atlases cached by earlier code then no longer match."""
+
+log = logging.getLogger(__name__)
 
 
 def _noise(rng: np.random.Generator, size: int, sigmas: tuple[float, ...], weights: tuple[float, ...]) -> np.ndarray:
@@ -103,3 +113,35 @@ def sample_atlas(atlas: np.ndarray, material: np.ndarray, u: np.ndarray, v: np.n
     top = c00 + (c01 - c00) * fu
     bottom = c10 + (c11 - c10) * fu
     return (top + (bottom - top) * fv) / 255.0
+
+
+def atlas_key(materials: list[Material], seed: int, size: int, contrast: float) -> str:
+    """Everything an atlas is a function of, as text: a cached atlas is used only where its key is equal."""
+    return json.dumps({"version": TEXTURE_CODE_VERSION, "seed": int(seed), "size": int(size),
+                       "contrast": float(contrast),
+                       "materials": [[m.name, m.style, [float(c) for c in m.color]] for m in materials]},
+                      sort_keys=True)
+
+
+def save_atlas(path: Path, atlas: np.ndarray, key: str) -> None:
+    """Write an atlas with its key (uncompressed ``.npz``: loads in milliseconds)."""
+    with path.open("wb") as fh:
+        np.savez(fh, atlas=atlas, key=np.array(key))
+
+
+def cached_atlas(path: Path | None, materials: list[Material], seed: int, size: int, contrast: float) -> np.ndarray:
+    """The atlas from ``path`` when it was written for these inputs, else generated (seconds for a room).
+
+    The capture stage writes ``truth/texture_atlas.npz``, so every later truth render (evaluation,
+    locality) skips the procedural noise. A missing, unreadable or stale file is only a cache miss.
+    """
+    key = atlas_key(materials, seed, size, contrast)
+    if path is not None and path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if str(data["key"]) == key:
+                    return data["atlas"]
+            log.info("%s was written for other texture inputs; generating the textures", path)
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
+            log.warning("%s is unreadable (%s); generating the textures", path, err)
+    return texture_atlas(materials, seed, size, contrast)
