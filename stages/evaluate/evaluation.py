@@ -301,31 +301,37 @@ class Evaluator:
                                  f"queries use {self.grounder.encoder.name!r}")
         results: dict[str, Any] = {"status": "computed", "threshold": self.config.grounding_threshold,
                                    "sources": sources, "language_source": language_note, "queries": []}
-        decoded: dict[str, np.ndarray] = {}  # per view: the language decoded to object probabilities, query-free
-        for q in tqdm(queries, desc="grounding queries", unit="query"):
-            entry: dict[str, Any] = dict(q)
+        entries: list[dict[str, Any]] = []
+        for q in queries:
             weights = self.grounder.object_weights(q["query"])
-            entry["object_weights"] = dict(zip(self.ds.objects, map(float, weights), strict=True))
-            for source in sources:
-                ious, frames = [], []
-                for (frame, out), masks in zip(rendered, truth_masks, strict=True):
-                    truth = masks[..., q["index"]]
-                    if not truth.any():
-                        continue  # the object is not in view: IoU is undefined there
+            entries.append(dict(q) | {"object_weights": dict(zip(self.ds.objects, map(float, weights), strict=True))}
+                           | {source: {"per_view": [], "frames": []} for source in sources})
+        # views outside, queries inside: a view's embedding is normalised (and decoded) once for all its queries
+        for (frame, out), masks in tqdm(list(zip(rendered, truth_masks, strict=True)), desc="grounding views",
+                                        unit="view"):
+            unit = self.grounder.unit_language(out["language"]) if "language" in sources else None
+            decoded = self.grounder.probs_from_unit_language(unit) if unit is not None else None
+            for q, entry in zip(queries, entries, strict=True):
+                truth = masks[..., q["index"]]
+                if not truth.any():
+                    continue  # the object is not in view: IoU is undefined there
+                for source in sources:
                     if source == "probs":
                         rel = self.grounder.relevancy_from_probs(out["probs"], q["query"])
                     elif source == "language":
-                        rel = self.grounder.relevancy_from_language(out["language"], q["query"])
-                    else:  # relevancy_from_language_objects, with the query-independent decoding done once per view
-                        if frame.frame_id not in decoded:
-                            decoded[frame.frame_id] = self.grounder.probs_from_language(out["language"])
-                        rel = self.grounder.relevancy_from_probs(decoded[frame.frame_id], q["query"])
+                        rel = self.grounder.relevancy_from_unit_language(unit, q["query"])
+                    else:  # language_objects: the query-independent decoding of this view, weighted by the query
+                        rel = self.grounder.relevancy_from_probs(decoded, q["query"])
+                    ious, frames = entry[source]["per_view"], entry[source]["frames"]
                     ious.append(iou(rel > self.config.grounding_threshold, truth))
                     frames.append(frame.frame_id)  # per-view IoUs pair up across methods by (query, frame)
                     if out_dir is not None and self.config.save_renders and len(ious) == 1:
                         slug = q["query"].replace(" ", "-")
                         _to_png(out_dir / "grounding" / f"{source}_{slug}_{frame.frame_id}.png", rel)
-                entry[source] = {"iou": summarize(ious), "per_view": ious, "frames": frames}
+        for entry in entries:
+            for source in sources:
+                per_view, frames = entry[source]["per_view"], entry[source]["frames"]
+                entry[source] = {"iou": summarize(per_view), "per_view": per_view, "frames": frames}
             results["queries"].append(entry)
         for source in sources:
             for kind in ("name", "synonym"):
