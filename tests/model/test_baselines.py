@@ -20,6 +20,8 @@ from stages.compare.method_comparison import (
 from stages.model import Trainer, build_model, load_config, load_run
 from stages.model.methods import SceneInfo
 from stages.model.methods.mk_planes import mk_planes_pairs, mk_planes_star_pairs
+from stages.model.ray_dataset import RayBatch
+from stages.model.rays import RayBundle
 
 
 def _info(n_objects: int) -> SceneInfo:
@@ -96,6 +98,39 @@ def test_k_planes_reads_time_not_states(tiny_overrides):
     b = model.coordinates(pos, torch.ones(4, 2), logits, t)
     assert torch.equal(a, b)
     assert torch.allclose(a[:, 3], 2 * t - 1)
+
+
+def _rays(n: int, n_objects: int) -> RayBundle:
+    g = torch.Generator().manual_seed(3)
+    d = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+    return RayBundle(torch.zeros(n, 3), d, torch.full((n,), 0.05), torch.full((n,), 1.5),
+                     torch.rand(n, n_objects, generator=g), torch.rand(n, generator=g))
+
+
+@pytest.mark.parametrize(("method", "reads"), [("livescene", True), ("conerf", True), ("mk-planes", False),
+                                               ("mk-planes-star", False), ("k-planes", False)])
+def test_probability_field_runs_at_every_level_only_where_the_field_reads_it(method, reads, tiny_overrides,
+                                                                             monkeypatch):
+    model = build_model(method, _tiny_model_config(tiny_overrides), _info(2)).train()
+    assert model.field_reads_probabilities is reads
+    calls = []
+    forward = type(model.probability_field).forward
+    monkeypatch.setattr(type(model.probability_field), "forward",
+                        lambda self, *a, **k: calls.append(1) or forward(self, *a, **k))
+    rays = _rays(16, 2)
+    out = model(rays, step=300, generator=torch.Generator().manual_seed(0))
+    levels = len(model.proposal_fields) + 1
+    assert len(calls) == (levels if reads else 1)
+    # the mask losses supervise every level whose logits exist: all for LiveScene and CoNeRF, the final one otherwise
+    assert len(out["level_logits"]) == (levels if reads else 1)
+    assert set(model.loss_dict(out, RayBatch(rays, torch.rand(16, 3), torch.zeros(16, dtype=torch.long),
+                                               torch.zeros(16, dtype=torch.long)), 300)) >= {
+        "rgb", "focal_mask"}
+    if not reads:
+        # the field ignores the logits, so skipping them at the proposal levels changes no rendered pixel
+        model.field_reads_probabilities = True
+        full = model(rays, step=300, generator=torch.Generator().manual_seed(0))
+        assert torch.equal(out["rgb"], full["rgb"]) and torch.equal(out["logits"], full["logits"])
 
 
 @pytest.mark.parametrize("method", ["mk-planes", "mk-planes-star", "conerf", "k-planes"])

@@ -7,7 +7,8 @@ cannot set an object's state independently of the clock. Same six planes of
 axis has ``field.k_resolution`` cells (the K-Planes time regularisers, L1 to 1
 and second-difference smoothness, act on it through the shared k-plane losses).
 Rendering a frame needs its ``frame_index``: states given to ``render`` are
-ignored by the field (they still condition the kept probability field).
+ignored by the field (they still condition the kept probability field, which runs at the final
+sampling level only).
 """
 
 from __future__ import annotations
@@ -21,10 +22,12 @@ from .livescene import LiveSceneModel
 class KPlanesTimeModel(LiveSceneModel):
     """K-Planes over (x, y, z, t)."""
 
+    field_reads_probabilities = False  # the probability field is kept for the evaluation only
+
     def field_dims(self) -> tuple[int, list[tuple[int, int]] | None]:
         return 4, None
 
-    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
+    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor | None,
                     times: torch.Tensor) -> torch.Tensor:
         """(x, y, z, 2 t - 1)."""
         t = times.to(positions.dtype)

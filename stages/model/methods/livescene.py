@@ -85,13 +85,23 @@ class LiveSceneModel(nn.Module):
         self.register_buffer("key_states", key_states)
 
     # -- hooks a baseline overrides ---------------------------------------------------------------------------
+    field_reads_probabilities: bool = True
+    """Whether ``coordinates`` reads the probability field's logits at every sampling level (LiveScene's
+    k-projection, CoNeRF's mask gating). A baseline whose field ignores them sets False: the probability field
+    then runs at the final level only, which is all the evaluation's probabilities and grounding need
+    (docs/baselines.md, "The probability field of the baselines")."""
+
     def field_dims(self) -> tuple[int, list[tuple[int, int]] | None]:
         """Coordinate width of the radiance/proposal fields and their plane pairs (None = all pairs)."""
         return 4, None
 
-    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
+    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor | None,
                     times: torch.Tensor) -> torch.Tensor:
-        """Field coordinates [N, D] of samples: (x, y, z, 2 kappa_u - 1)."""
+        """Field coordinates [N, D] of samples: (x, y, z, 2 kappa_u - 1).
+
+        ``logits`` is None only at a proposal level of a method with ``field_reads_probabilities`` False.
+        """
+        assert logits is not None, "the k-projection needs the probability field's logits"
         k, _ = self.probability_field.project(logits, states)
         return torch.cat([positions, (2.0 * k - 1.0).unsqueeze(-1).to(positions.dtype)], dim=-1)
 
@@ -119,10 +129,13 @@ class LiveSceneModel(nn.Module):
         # one set of plane grids per level: the spatial xy/xz/yz grid serves the probability tri-plane and every
         # scale of the density field, the k grid every scale
         grids: PlaneGrids = {}
-        # the tri-plane is sampled at box-normalised positions (the reference code forgets to normalise)
-        logits = self.probability_field(pos, states, grids)
+        out: dict[str, torch.Tensor] = {}
+        logits = None
+        if final or self.field_reads_probabilities:
+            # the tri-plane is sampled at box-normalised positions (the reference code forgets to normalise)
+            logits = self.probability_field(pos, states, grids)
+            out["logits"] = logits.view(n_rays, n_samp, -1)
         coords = self.coordinates(pos, st, logits, t)
-        out: dict[str, torch.Tensor] = {"logits": logits.view(n_rays, n_samp, -1)}
         if final:
             sigma, geo = self.field.density(coords, grids)
             weights = render_weights(sigma.view(n_rays, n_samp), samples.deltas)
@@ -207,7 +220,9 @@ class LiveSceneModel(nn.Module):
         if training:
             out["proposal"] = [(s, lv["weights"]) for s, lv in levels]
             out["final"] = (samples, w)
-            out["level_logits"] = [render_features(lv["weights"].detach(), lv["logits"]) for _, lv in levels]
+            # the mask losses supervise every level whose logits were computed
+            out["level_logits"] = [render_features(lv["weights"].detach(), lv["logits"])
+                                   for _, lv in levels if "logits" in lv]
             out["level_logits"].append(out["logits"])
         return out
 

@@ -13,7 +13,8 @@ that (3 + alpha)-D space into planes:
 The proposal density fields use the same pair list, so only the field differs
 from LiveScene: samplers, renderer, losses and trainer are shared. The
 interaction probability field is kept (trained by the same mask losses) so
-every method renders ``probs`` for the evaluation; it does not feed the field.
+every method renders ``probs`` for the evaluation; it does not feed the field, so it runs at the final
+sampling level only (``field_reads_probabilities``).
 """
 
 from __future__ import annotations
@@ -46,6 +47,8 @@ def state_coordinates(positions: torch.Tensor, states: torch.Tensor) -> torch.Te
 class MKPlanesModel(LiveSceneModel):
     """K-Planes over all pairs of (x, y, z, k_1..k_alpha)."""
 
+    field_reads_probabilities = False  # the probability field is kept for the evaluation only
+
     def __init__(self, config: ModelConfig, info: SceneInfo) -> None:
         super().__init__(config, info)
 
@@ -55,7 +58,7 @@ class MKPlanesModel(LiveSceneModel):
     def field_dims(self) -> tuple[int, list[tuple[int, int]] | None]:
         return 3 + self.info.n_objects, self.plane_pairs()
 
-    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor,
+    def coordinates(self, positions: torch.Tensor, states: torch.Tensor, logits: torch.Tensor | None,
                     times: torch.Tensor) -> torch.Tensor:
         """Every object's state is a coordinate (the probability field does not feed the field)."""
         return state_coordinates(positions, states)
