@@ -5,14 +5,11 @@ Shared by the benchmark scripts (run as ``python benchmarks/<name>.py``, so this
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
+
 ROOT = Path(__file__).resolve().parents[1]
-# this checkout's code ahead of the venv's editable install, which points at whichever checkout installed it: a
-# benchmark started in another worktree (a before/after comparison) must run that worktree's stages
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 
 def cached_demo_dataset(work: Path, capture: Path | None = None) -> tuple[Path, Path]:

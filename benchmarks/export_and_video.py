@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -31,6 +31,8 @@ import sys
 import time
 from pathlib import Path
 
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
+
 ROOT = Path(__file__).resolve().parents[1]
 LIVESCENE = [sys.executable, "-m", "stages.cli"]
 

@@ -28,14 +28,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
+
+from stages.labels import LabelsConfig, ingest_labels
+from stages.labels.propagation import iou_per_object
+from stages.scene import onehot_to_label_map
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 LIVESCENE = [sys.executable, "-m", "stages.cli"]
-
-from stages.labels import LabelsConfig, ingest_labels  # noqa: E402
-from stages.labels.propagation import iou_per_object  # noqa: E402
-from stages.scene import onehot_to_label_map  # noqa: E402
 
 
 def sh(args: list[str], log: Path) -> None:

@@ -19,6 +19,7 @@ import platform
 import resource
 import time
 
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
 import torch
 
 from stages.model import build_model, load_config

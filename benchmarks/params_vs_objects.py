@@ -15,6 +15,7 @@ import argparse
 from pathlib import Path
 
 import pandas as pd
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
 
 from stages.compare.method_comparison import ALL_METHODS, params_vs_objects
 from stages.scene import atomic_path

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
 
 from stages.scene import Camera, Frame, SceneDataset, generate_rays, label_map_to_onehot, write_mask, write_scene
 

@@ -35,6 +35,8 @@ import threading
 import time
 from pathlib import Path
 
+import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "viewer")]
 # as `livescene view` does, before torch loads OpenMP (docs/viewer.md)
