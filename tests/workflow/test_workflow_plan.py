@@ -67,6 +67,7 @@ def test_scene_without_names_skips_language(mixed_plan):
         assert not any("--language-targets" in t for t in jobs["train"])
     filmed = mixed_plan.scene_jobs("filmed")
     assert {"frames", "poses", "labels", "states", "assemble"} <= set(filmed)
+    assert not any("--missing-masks" in t for t in filmed["labels"])  # the default, the stage's own: propagate
     assert "capture" not in filmed and "pose_compare" not in filmed
     assert "frames" not in mixed_plan.scene_jobs("plain")
 
@@ -86,6 +87,16 @@ def test_config_error_names_file_key_and_type(workflow_copy):
     assert "key 'seed'" in run.output and "'integer'" in run.output
     assert "key 'methods.1'" in run.output and "'nerf'" in run.output
     assert not (workflow_copy.root / "results").exists()
+
+
+def test_missing_masks_policy_reaches_the_labels_stage_and_is_checked(workflow_copy):
+    leave = workflow_copy.write_config(labels={"missing_masks": "leave"})
+    jobs = workflow_copy.dry_run("--configfile", str(leave)).scene_jobs("demo")
+    assert len(jobs["labels"]) == 1 and "--missing-masks leave" in jobs["labels"][0]
+    bad = workflow_copy.write_config(labels={"missing_masks": "guess"})
+    run = workflow_copy.snakemake("-n", "--cores", "1", "--configfile", str(bad))
+    assert run.code != 0
+    assert "key 'labels.missing_masks'" in run.output and "'guess'" in run.output
 
 
 def test_scene_sheet_errors_name_line_scene_and_column(workflow_copy):

@@ -56,10 +56,14 @@ def labels_input(wildcards):
 
 
 def labels_args(wildcards, input):
+    # named only when it is not the stage's own default, so the commands (and Snakemake's params trigger) of
+    # existing results stay as they were
+    policy = config["labels"]["missing_masks"]
+    missing = "" if policy == "propagate" else f" --missing-masks {policy}"
     if "capture" in input.keys():
-        return f"--input {Path(input.capture, 'masks')} --mapping {Path(input.capture, 'mapping.yaml')}"
+        return f"--input {Path(input.capture, 'masks')} --mapping {Path(input.capture, 'mapping.yaml')}{missing}"
     names = f" --mapping {input.names}" if "names" in input.keys() else ""
-    return f"--input {input.masks}{names}"
+    return f"--input {input.masks}{names}{missing}"
 
 
 def control_commands(wildcards):
