@@ -37,7 +37,6 @@ from .camera_path import camera_path, seeded_rng
 from .renderer import ATLAS_FILE, SceneRenderer
 from .spec import CaptureSpec, spec_to_dict
 from .state_schedule import state_table
-from .textures import atlas_key, save_atlas
 
 GENERATOR_VERSION = "1"
 
@@ -148,9 +147,7 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
             w.writerows(rows)
         (truth / "scene.json").write_text(json.dumps(scene_info(spec, renderer), indent=1) + "\n")
         (truth / "spec.yaml").write_text(yaml.safe_dump(spec_to_dict(spec), sort_keys=False))
-        r = spec.render
-        save_atlas(truth / ATLAS_FILE, renderer.atlas,
-                   atlas_key(renderer.model.materials, spec.seed, r.texture_size, r.contrast))
+        renderer.write_atlas(truth / ATLAS_FILE)
 
         (tmp / "mapping.yaml").write_text(yaml.safe_dump({k: n for k, n in enumerate(names, start=1)}))
         (tmp / "key_frame_value.yaml").write_text(

@@ -19,7 +19,7 @@ from stages.scene.transforms import camera_from_dict
 
 from .geometry import FACE_AXES, FACE_UV_AXES, SceneModel, build_scene
 from .spec import CaptureSpec, CaptureSpecError, spec_from_dict
-from .textures import cached_atlas, sample_atlas
+from .textures import atlas_key, cached_atlas, sample_atlas, save_atlas
 
 ATLAS_FILE = "texture_atlas.npz"
 """The capture's texture atlas, in ``truth/``: a cache, regenerated from the spec where missing or stale."""
@@ -34,7 +34,9 @@ class SceneRenderer:
         self.spec = spec
         self.model: SceneModel = build_scene(spec)
         r = spec.render
-        self.atlas = cached_atlas(atlas_file, self.model.materials, spec.seed, r.texture_size, r.contrast)
+        # what the atlas is a function of, for the cache lookup here and the capture's write_atlas
+        self._texture_inputs = (self.model.materials, spec.seed, r.texture_size, r.contrast)
+        self.atlas = cached_atlas(atlas_file, *self._texture_inputs)
         rng = np.random.default_rng([spec.seed, 7])
         # a random texture offset per part and face, so no two faces show the same patch
         self.face_offsets = rng.uniform(0, r.texture_size, size=(len(self.model.parts), 6, 2))
@@ -43,6 +45,10 @@ class SceneRenderer:
         self._cached_states: np.ndarray | None = None
         self._scene: o3d.t.geometry.RaycastingScene | None = None
         self._poses: np.ndarray | None = None
+
+    def write_atlas(self, path: Path) -> None:
+        """Save the texture atlas with its key, for a later renderer of the same spec to load (``atlas_file``)."""
+        save_atlas(path, self.atlas, atlas_key(*self._texture_inputs))
 
     @property
     def objects(self) -> list[str]:
