@@ -26,7 +26,11 @@ def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
     p.add_argument("--device", default="auto", help="auto | cpu | cuda (default auto)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config field, e.g. --set train.batch_rays=2048 (repeatable)")
-    p.add_argument("--resume", action="store_true", help="continue from the run folder's latest checkpoint")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from the run folder's latest checkpoint (only one of the same data and config)")
+    p.add_argument("--restart-stale", action="store_true",
+                   help="with --resume: when the checkpoint was trained on other data or config, discard it and train "
+                        "from step 0 instead of stopping with an error (what the workflow does on rerun)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -43,7 +47,8 @@ def main(argv: list[str] | None = None) -> int:
         overrides.append(f"train.max_steps={args.max_steps}")
     config = load_config(args.preset, overrides, method=args.method, seed=args.seed, data=args.data,
                          language_targets=args.language_targets)
-    trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress)
+    trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress,
+                      restart_stale=args.restart_stale)
     summary = trainer.train()
     if summary.get("status") == "sigterm":
         print(f"stopped by SIGTERM at step {summary['step']}; checkpoint saved, resume with --resume",

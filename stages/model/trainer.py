@@ -3,13 +3,14 @@
 Every method of the registry trains here. A run folder holds::
 
     config.yaml              the full RunConfig (written first)
-    checkpoints/step_*.pt    model, optimiser, scheduler, every RNG state, wall time so far
+    checkpoints/step_*.pt    model, optimiser, scheduler, every RNG state, wall time so far, config, data digest
     train_log.csv            wall_s, step, lr, loss, each term, eval_psnr and eval_miou (periodic), rays_per_s
     model.pt                 final weights + what load_run needs (written last)
     run.json                 method, parameters, peak memory, train seconds, steps, device, objects, normalisation
 
 Resuming restores the RNG states of torch, numpy, Python and both samplers'
 generators, so on the CPU a resumed run is bit-identical to an uninterrupted one.
+A checkpoint resumes only onto the config and data it was trained on (run_inputs.py).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
 from .ray_dataset import RayDataset, frame_times, state_vector
+from .run_inputs import config_differences, data_digest
 from .scene_normalization import SceneNormalization
 
 MODEL_FORMAT = 2
@@ -156,11 +158,13 @@ class Trainer:
     """Trains one method on one scene dataset into a run folder."""
 
     def __init__(self, config: RunConfig, out_dir: str | Path, device: str = "auto", resume: bool = False,
-                 progress: bool = True) -> None:
+                 progress: bool = True, restart_stale: bool = False) -> None:
         self.config = config
         self.out = Path(out_dir)
         self.device = resolve_device(device)
         self.resume = resume
+        self.restart_stale = restart_stale
+        """With ``resume``: a checkpoint of other inputs is discarded and training starts over (else an error)."""
         self.progress = progress
         self._stop_reason: str | None = None
         self.amp_dtype = autocast_dtype(config.train.mixed_precision, self.device)
@@ -189,6 +193,7 @@ class Trainer:
         self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=given)
         self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=given)
         self.info = scene_info(self.ds, cfg, self.language)
+        self.data_digest = data_digest(self._data_tensors())
         if mode == "learned" and not self.info.key_times:
             raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
                              "annotate key frames, or set --set model.state.key_frame_every=N")
@@ -221,6 +226,21 @@ class Trainer:
         self.log_rows: list[dict[str, Any]] = []
         self.last_eval_miou: float | None = None
 
+    def _data_tensors(self) -> dict[str, Any]:
+        """Everything of the dataset that training reads, as tensors: the checkpoint's data digest covers these."""
+        out: dict[str, Any] = {}
+        for split, rays in (("train", self.train_rays), ("eval", self.eval_rays)):
+            for name in ("images", "labels", "states", "times", "rotations", "centres", "shared_dirs", "cam_dirs",
+                         "frame_index"):
+                out[f"{split}.{name}"] = getattr(rays, name)
+        if self.language is not None:
+            for name in ("levels", "embeddings", "background"):
+                out[f"language.{name}"] = getattr(self.language, name)
+        out["objects"] = np.array(list(self.info.objects), dtype=str)
+        out["key_times"] = np.asarray(self.info.key_times, dtype=np.float64)
+        out["key_states"] = np.asarray(self.info.key_states, dtype=np.float64)
+        return out
+
     # -- checkpoints ----------------------------------------------------------------------------------------
     def checkpoint_path(self, step: int) -> Path:
         return self.out / "checkpoints" / f"step_{step:06d}.pt"
@@ -249,6 +269,7 @@ class Trainer:
                 "jitter": self.jitter_generator.get_state(),
             },
             "config": self.config.to_dict(),
+            "data_digest": self.data_digest,
         }
         path = self.checkpoint_path(self.step)
         with atomic_path(path, suffix=".pt") as tmp:
@@ -258,8 +279,41 @@ class Trainer:
             old.unlink(missing_ok=True)
         return path
 
-    def load_checkpoint(self, path: Path) -> None:
+    def stale_reason(self, state: dict[str, Any]) -> str:
+        """Why a checkpoint belongs to other inputs than this run's ('' when it continues this run)."""
+        reasons = []
+        if state.get("data_digest") is None:
+            reasons.append("it records no data digest (written by an older livescene), so its data cannot be checked")
+        elif state["data_digest"] != self.data_digest:
+            reasons.append(f"its training data differ from {self.config.data} (poses, images, masks, states or "
+                           "language targets changed)")
+        changed = config_differences(state.get("config", {}), self.config.to_dict())
+        if changed:
+            shown = ", ".join(changed[:6]) + (f" and {len(changed) - 6} more" if len(changed) > 6 else "")
+            reasons.append(f"its config differs in {shown}")
+        return "; ".join(reasons)
+
+    def discard_checkpoints(self, why: str) -> None:
+        """Remove a stale run's checkpoints and log (model.pt and run.json are rewritten at the end)."""
+        for old in sorted((self.out / "checkpoints").glob("step_*.pt")):
+            old.unlink()
+        (self.out / "train_log.csv").unlink(missing_ok=True)
+        print(f"{self.out}: starting over, the checkpoints there were of another run: {why}", file=sys.stderr)
+
+    def resume_from(self, path: Path) -> None:
+        """Continue from ``path`` if it holds this run; a stale one is discarded (``restart_stale``) or refused."""
         state = torch.load(path, map_location=self.device, weights_only=False)
+        why = self.stale_reason(state)
+        if not why:
+            self.load_checkpoint(state)
+        elif self.restart_stale:
+            self.discard_checkpoints(why)
+        else:
+            raise InputError(path, f"cannot resume: {why}",
+                             "resume with the inputs and config it was trained on, write this run to a new --out, "
+                             "or pass --restart-stale to discard those checkpoints and train from step 0")
+
+    def load_checkpoint(self, state: dict[str, Any]) -> None:
         self.model.load_state_dict(state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
@@ -415,7 +469,7 @@ class Trainer:
         if self.resume:
             ckpt = self.latest_checkpoint()
             if ckpt is not None:
-                self.load_checkpoint(ckpt)
+                self.resume_from(ckpt)
         elif (self.out / "checkpoints").is_dir() and any((self.out / "checkpoints").glob("step_*.pt")):
             raise InputError(self.out, "already holds checkpoints of a run",
                              "pass --resume to continue it, or choose a new --out folder")
@@ -540,6 +594,7 @@ class Trainer:
             "eval_psnr": eval_psnr,
             "eval_miou": self.last_eval_miou,
             "data": str(cfg.data),
+            "data_digest": self.data_digest,
             "seed": cfg.seed,
             "rays_per_step": cfg.train.batch_rays,
         }

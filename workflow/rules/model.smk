@@ -6,7 +6,8 @@ rule train:
     input:
         unpack(train_input),
     output:
-        # run.json, not the folder: an interrupted job leaves its checkpoints and the rerun resumes.
+        # run.json, not the folder: an interrupted job leaves its checkpoints and the rerun resumes (a job rerun
+        # for new inputs or config finds them stale and starts over: --restart-stale).
         R("{scene}", "runs", "{method}", "run.json"),
     log:
         R("{scene}", "logs", "train_{method}.log"),
@@ -35,5 +36,5 @@ rule train:
         ENV
     shell:
         "{params.cli} train --data {input.data} --method {wildcards.method} --preset {params.preset}"
-        " --out {params.run} --resume --max-steps {params.steps} --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
+        " --out {params.run} --resume --restart-stale --max-steps {params.steps} --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
         " --set train.threads={params.torch_threads} --set train.eval_every={params.eval_every} {params.args} --no-progress > {log} 2>&1"

@@ -1,0 +1,70 @@
+"""What a run trains on, recorded so that a checkpoint only resumes onto the same inputs.
+
+A checkpoint carries the run's config and a digest of the training data as the
+trainer sees it (the rays' pixels, labels, states, times, normalised poses and
+directions, the language targets). ``--resume`` continues a checkpoint only when
+both match; otherwise the run folder holds a different run (the poses were
+re-estimated, a mask changed, a hyperparameter moved) and continuing it would
+silently hand back a model of the old inputs (docs/model.md, "Resuming").
+"""
+
+from __future__ import annotations
+
+import hashlib
+from typing import Any
+
+import numpy as np
+import torch
+
+EXECUTION_ONLY: dict[str, frozenset[str] | None] = {
+    # None: the whole section; a set: those keys of it
+    "train": frozenset({"max_steps", "max_seconds", "eval_every", "eval_rays", "checkpoint_every",
+                        "keep_checkpoints", "log_every", "max_nonfinite", "render_chunk", "threads", "compile"}),
+    "trust": None,
+    "data": None,
+    "language_targets": None,
+    "preset": None,
+}
+"""Config entries a resumed run may change: how long and how it runs, where the inputs live (their contents are in
+the data digest), and the report's floors. Everything else defines what is learned."""
+
+
+def _learned_part(config: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        if key in EXECUTION_ONLY and EXECUTION_ONLY[key] is None:
+            continue
+        skip = EXECUTION_ONLY.get(key)
+        out[key] = {k: v for k, v in value.items() if k not in skip} if skip and isinstance(value, dict) else value
+    return out
+
+
+def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in d.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def config_differences(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    """The config keys (dotted) whose learned-run values differ between two ``RunConfig.to_dict()``s."""
+    a, b = _flatten(_learned_part(old)), _flatten(_learned_part(new))
+    return sorted(k for k in a.keys() | b.keys() if a.get(k, "<absent>") != b.get(k, "<absent>"))
+
+
+def data_digest(tensors: dict[str, torch.Tensor | np.ndarray | None]) -> str:
+    """SHA-256 over named tensors (name, dtype, shape and bytes, in name order); None entries count as absent."""
+    h = hashlib.sha256()
+    for name in sorted(tensors):
+        t = tensors[name]
+        if t is None:
+            h.update(f"{name}:none;".encode())
+            continue
+        arr = t.detach().cpu().contiguous().numpy() if isinstance(t, torch.Tensor) else np.ascontiguousarray(t)
+        h.update(f"{name}:{arr.dtype.str}:{arr.shape};".encode())
+        h.update(arr.tobytes())
+    return h.hexdigest()

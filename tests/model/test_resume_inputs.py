@@ -1,0 +1,96 @@
+"""A checkpoint resumes only onto the data and config it was trained on; a stale one is refused or restarted."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import pytest
+import torch
+
+from stages.model import Trainer
+from stages.model.run_inputs import config_differences, data_digest
+from stages.model.train_cli import main as train_main
+from stages.scene import InputError
+
+
+def _finished(config, out):
+    Trainer(config, out, device="cpu", progress=False).train()
+    return json.loads((out / "run.json").read_text())
+
+
+def _moved_pose_copy(src, dst):
+    """The dataset with one camera moved by 1 cm: what a re-estimation of the poses does."""
+    shutil.copytree(src, dst)
+    path = dst / "transforms.json"
+    data = json.loads(path.read_text())
+    data["frames"][0]["transform_matrix"][0][3] += 0.01
+    path.write_text(json.dumps(data))
+    return dst
+
+
+def test_resume_onto_moved_poses_is_refused_naming_the_data(tiny_dataset, tmp_path, tiny_config):
+    out = tmp_path / "run"
+    first = _finished(tiny_config(tiny_dataset.root, steps=3), out)
+    moved = _moved_pose_copy(tiny_dataset.root, tmp_path / "moved")
+    with pytest.raises(InputError, match="training data differ") as err:
+        Trainer(tiny_config(moved, steps=3), out, device="cpu", progress=False, resume=True).train()
+    assert "--restart-stale" in str(err.value)
+    # nothing of the old run was touched
+    assert json.loads((out / "run.json").read_text()) == first
+    assert (out / "checkpoints" / "step_000003.pt").is_file()
+
+
+def test_restart_stale_trains_from_step_zero_on_the_new_data(tiny_dataset, tmp_path, tiny_config):
+    out = tmp_path / "run"
+    first = _finished(tiny_config(tiny_dataset.root, steps=3), out)
+    moved = _moved_pose_copy(tiny_dataset.root, tmp_path / "moved")
+    fresh = tmp_path / "fresh"
+    expected = _finished(tiny_config(moved, steps=3), fresh)
+    assert expected["data_digest"] != first["data_digest"]
+
+    Trainer(tiny_config(moved, steps=3), out, device="cpu", progress=False, resume=True, restart_stale=True).train()
+    run = json.loads((out / "run.json").read_text())
+    assert run["data_digest"] == expected["data_digest"] and run["steps"] == 3
+    with (out / "train_log.csv").open() as fh:
+        assert [int(r["step"]) for r in csv.DictReader(fh)] == [1, 2, 3]
+    a = torch.load(out / "model.pt", weights_only=True)["state_dict"]
+    b = torch.load(fresh / "model.pt", weights_only=True)["state_dict"]
+    for k in a:  # the restarted run is the run a fresh folder gives
+        torch.testing.assert_close(a[k], b[k], rtol=0, atol=0, equal_nan=True, msg=k)
+
+
+def test_config_change_is_named_and_longer_training_still_resumes(tiny_dataset, tmp_path, tiny_config):
+    out = tmp_path / "run"
+    _finished(tiny_config(tiny_dataset.root, steps=3), out)
+    with pytest.raises(InputError, match=r"config differs in train\.lr"):
+        Trainer(tiny_config(tiny_dataset.root, "train.lr=0.001", steps=3), out, device="cpu", progress=False,
+                resume=True).train()
+    # more steps, another thread count: the same run, continued
+    Trainer(tiny_config(tiny_dataset.root, "train.threads=2", steps=5), out, device="cpu", progress=False,
+            resume=True).train()
+    with (out / "train_log.csv").open() as fh:
+        assert [int(r["step"]) for r in csv.DictReader(fh)] == [1, 2, 3, 4, 5]
+
+
+def test_cli_restart_stale_flag(tiny_dataset, tmp_path, tiny_overrides, capsys):
+    out = tmp_path / "run"
+    sets = [a for o in tiny_overrides for a in ("--set", o)]
+    base = ["--method", "livescene", "--preset", "cpu-demo", "--out", str(out), "--max-steps", "2", "--device", "cpu",
+            "--no-progress", *sets]
+    assert train_main(["--data", str(tiny_dataset.root), *base]) == 0
+    moved = _moved_pose_copy(tiny_dataset.root, tmp_path / "moved")
+    assert train_main(["--data", str(moved), "--resume", *base]) != 0
+    assert "cannot resume" in capsys.readouterr().err
+    assert train_main(["--data", str(moved), "--resume", "--restart-stale", *base]) == 0
+    assert "starting over" in capsys.readouterr().err
+
+
+def test_digest_and_differences_helpers():
+    a = {"x": torch.arange(4, dtype=torch.float32), "y": None}
+    assert data_digest(a) == data_digest({"y": None, "x": torch.arange(4, dtype=torch.float32)})
+    assert data_digest(a) != data_digest({"x": torch.arange(4, dtype=torch.float64), "y": None})
+    old = {"seed": 0, "data": "a", "train": {"lr": 0.02, "max_steps": 10}, "trust": {"min_psnr": 20.0}}
+    new = {"seed": 1, "data": "b", "train": {"lr": 0.02, "max_steps": 99}, "trust": {"min_psnr": 5.0}}
+    assert config_differences(old, new) == ["seed"]
