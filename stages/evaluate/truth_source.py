@@ -1,7 +1,8 @@
 """The ground truth of a synthetic capture, seen from the model's world.
 
 The dataset world may be the truth world (a dataset written from the truth)
-or a COLMAP world (estimated poses: arbitrary origin, rotation and scale).
+or a COLMAP world (estimated poses: arbitrary scale, turned upright and to
+the walls by the poses stage; docs/poses.md "World frame").
 For a dataset frame, the truth pose is taken, in order of preference:
 
 1. from ``truth/transforms.json`` by the frame's ``source_index`` (the very

@@ -46,6 +46,9 @@ def _estimate_parser() -> argparse.ArgumentParser:
                    help="longest side for feature extraction (-1 = full)")
     p.add_argument("--max-features", type=int, default=d.max_num_features, help="SIFT features per frame")
     p.add_argument("--mask-dilate", type=int, help="mask dilation in pixels (default 1%% of the diagonal)")
+    p.add_argument("--no-orient", action="store_true",
+                   help="keep the world frame of the model as it is (default: z up, x and y along the walls, origin "
+                        "at the scene box centre; docs/poses.md, World frame)")
     p.add_argument("--keep-database", action="store_true", help="keep COLMAP's database.db")
     p.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -103,6 +106,7 @@ def _estimate(argv: list[str]) -> int:
                       min_registered=a.min_registered, max_still_share=a.max_still_share,
                       camera_model=a.camera_model, max_image_size=a.max_image_size,
                       max_num_features=a.max_features, mask_dilate_px=a.mask_dilate, keep_database=a.keep_database,
+                      orient=not a.no_orient,
                       progress=not a.no_progress, verbose=a.verbose)
     s = estimate_poses(cfg)
     for warning in s["warnings"]:
@@ -131,6 +135,9 @@ def _import_parser() -> argparse.ArgumentParser:
     which.add_argument("--images", type=Path, help="the folder the model was made from (COLMAP's image path)")
     p.add_argument("--min-registered", type=float, default=0.8,
                    help="smallest fraction of the frames that must have a posed image in the model")
+    p.add_argument("--no-orient", action="store_true",
+                   help="keep the world frame of the model as it is (default: z up, x and y along the walls, origin "
+                        "at the scene box centre; docs/poses.md, World frame)")
     return p
 
 
@@ -141,7 +148,7 @@ def _import(argv: list[str]) -> int:
     if not 0.0 <= a.min_registered <= 1.0:
         raise InputError(Path("--min-registered"), f"{a.min_registered} is not a fraction", "give a value in [0, 1]")
     s = import_model(ImportConfig(model_dir=a.model, out_dir=a.out, images_dir=a.images, frames_dir=a.frames,
-                                  min_registered=a.min_registered))
+                                  min_registered=a.min_registered, orient=not a.no_orient))
     for warning in s["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"imported {s['imported_from']['model']} ({s['imported_from']['format']}): {s['n_registered']}/"

@@ -29,8 +29,9 @@ from .errors import PoseQualityError
 from .frame_list import IMAGE_SUFFIXES, read_frame_list
 from .model_export import SUPPORTED_CAMERA_MODELS, relative_file_path, transforms_dict, write_model_outputs
 from .quality_gate import compact_names, intrinsics_warnings
+from .world_frame import orient_reconstruction
 
-STAGE_VERSION = "1"
+STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
 MODEL_FILES = ("cameras", "images", "points3D")
 MODEL_LAYOUTS = (".", "sparse/0", "colmap/sparse/0", "0", "sparse")
 """Where a model may sit below ``--model``: the model folder itself, a COLMAP project (sparse/0), an
@@ -56,6 +57,9 @@ class ImportConfig:
     """FRAMES folder of `livescene frames`: COLMAP images are matched to frames by frame number."""
     min_registered: float = 0.8
     """Smallest accepted fraction of the frames (or images) that get a pose from the model."""
+    orient: bool = True
+    """Turn the model's world to z up and x, y along the walls (world_frame.py), as ``livescene poses`` does;
+    False keeps the model's own frame."""
 
 
 @dataclass
@@ -353,11 +357,13 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
         timings["match"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        frame = orient_reconstruction(rec) if cfg.orient else None
         file_paths = {f: relative_file_path(image_dir / f, cfg.out_dir) for f in registered}
         transforms = transforms_dict(rec, {f: source_index.get(f) for f in registered}, file_paths=file_paths)
         if "fl_x" in transforms:
             warnings_ += intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
-        write_model_outputs(out, rec, transforms, source=f"livescene poses import of {located.folder}")
+        write_model_outputs(out, rec, transforms, source=f"livescene poses import of {located.folder}",
+                            world_frame=None if frame is None else frame.as_dict())
         timings["export"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
         cameras = list(rec.cameras.values())
@@ -386,7 +392,8 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
             "matcher": None,
             "camera": {"model": cameras[0].model.name, "params": [float(p) for p in cameras[0].params]},
             "n_cameras": len(cameras),
-            "config": {"min_registered": cfg.min_registered},
+            "config": {"min_registered": cfg.min_registered, "orient": cfg.orient},
+            "world_frame": None if frame is None else frame.as_dict(),
             "warnings": warnings_,
             "timings": timings,
         }

@@ -68,6 +68,9 @@ class PosesConfig:
     """Pose gate: steps shorter than this fraction of the median point depth are never jumps."""
     max_spread_ratio: float = 20.0
     """Pose gate: warn when a camera lies farther than this many median point depths from the middle of the path."""
+    orient: bool = True
+    """Turn the world so that z is up and x, y follow the walls, origin at the scene box centre (world_frame.py);
+    False keeps the frame COLMAP's first image pair gave."""
     keep_database: bool = False
     """Keep COLMAP's database.db in the output (large; useful for debugging)."""
     progress: bool = True

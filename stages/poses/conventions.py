@@ -4,9 +4,9 @@ COLMAP stores for each image the rigid transform ``cam_from_world`` with
 camera axes x right, y down, z forward, its rotation as a unit quaternion
 (``qw qx qy qz`` in images.txt; pycolmap's ``Rotation3d.quat`` is ``[x, y, z, w]``).
 nerfstudio's ``transform_matrix`` is the inverse (camera to world) with the
-camera looking down -z and +y up, so the y and z camera axes flip. The world
-frame itself is left untouched: transforms.json, points3D.ply and sparse/0
-all share COLMAP's world coordinates.
+camera looking down -z and +y up, so the y and z camera axes flip. These conversions leave the
+world frame as it is; transforms.json, points3D.ply and sparse/0 share one
+world (COLMAP's, turned upright by world_frame.py unless --no-orient).
 """
 
 from __future__ import annotations

@@ -109,7 +109,8 @@ def transforms_dict(reconstruction: pycolmap.Reconstruction, source_index: Mappi
             frame["source_index"] = int(source_index[name])  # type: ignore[arg-type]
         frames.append(frame)
     out["frames"] = frames
-    # nerfstudio reads this to undo any world change; none is applied (COLMAP world as is)
+    # nerfstudio reads this to undo a world change made after the COLMAP model; the upright turn
+    # (world_frame.py) is applied to sparse/0 as well, so the model and this file agree: identity
     out["applied_transform"] = np.eye(4)[:3].tolist()
     out["ply_file_path"] = "points3D.ply"
     return out
@@ -130,19 +131,25 @@ def write_ply(cloud: o3d.geometry.PointCloud, path: Path) -> None:
             raise OSError(f"open3d could not write {path}")
 
 
+def inlier_points(cloud: o3d.geometry.PointCloud, nb_neighbors: int = 20, std_ratio: float = 2.0
+                  ) -> o3d.geometry.PointCloud:
+    """The points open3d's statistical filter keeps: those whose mean neighbour distance is at most ``std_ratio``
+    deviations above average (stray triangulations far outside the room go)."""
+    if len(cloud.points) <= nb_neighbors:
+        return cloud
+    kept, _ = cloud.remove_statistical_outlier(nb_neighbors=nb_neighbors, std_ratio=std_ratio)
+    return kept
+
+
 def scene_box(cloud: o3d.geometry.PointCloud, camera_centres: np.ndarray, nb_neighbors: int = 20,
               std_ratio: float = 2.0) -> tuple[np.ndarray, dict[str, Any]]:
     """Axis-aligned box around the points left after statistical outlier removal, grown to hold the cameras.
 
-    Stray triangulations far outside the room would blow the box (and the
-    model's sampling volume) up; open3d's statistical filter drops points
-    whose mean neighbour distance is ``std_ratio`` deviations above average.
-    The cameras are included because the model samples rays starting at them.
+    Stray triangulations far outside the room would blow the box (and the model's sampling volume) up
+    (``inlier_points``). The cameras are included because the model samples rays starting at them.
     """
     n = len(cloud.points)
-    kept = cloud
-    if n > nb_neighbors:
-        kept, _ = cloud.remove_statistical_outlier(nb_neighbors=nb_neighbors, std_ratio=std_ratio)
+    kept = inlier_points(cloud, nb_neighbors, std_ratio)
     pts = np.asarray(kept.points)
     if len(camera_centres):
         pts = np.concatenate([pts, camera_centres]) if len(pts) else np.asarray(camera_centres)
@@ -153,7 +160,7 @@ def scene_box(cloud: o3d.geometry.PointCloud, camera_centres: np.ndarray, nb_nei
 
 
 def write_model_outputs(out: Path, reconstruction: pycolmap.Reconstruction, transforms: dict[str, Any],
-                        source: str) -> dict[str, Any]:
+                        source: str, world_frame: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write sparse/0, transforms.json, points3D.ply and scene.json into ``out``; return scene.json.
 
     ``transforms`` is ``transforms_dict``'s result for this model; the scene box holds the points
@@ -170,5 +177,7 @@ def write_model_outputs(out: Path, reconstruction: pycolmap.Reconstruction, tran
     scene = {"scene_box": box.tolist(), "units": "colmap",
              "scene_box_rule": "open3d statistical outlier removal on points3D, grown to include the camera centres",
              **box_info, "source": source}
+    if world_frame is not None:
+        scene["world_frame"] = world_frame
     write_json(out / "scene.json", scene)
     return scene

@@ -18,7 +18,7 @@ from .camera_motion import FeatureMotion, feature_motion
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
 from .frame_list import FrameList, read_frame_list
-from .model_export import point_cloud, registered_poses, scene_box, transforms_dict, write_ply
+from .model_export import registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
     check_motion,
@@ -33,8 +33,9 @@ from .quality_gate import (
 from .sfm import SfmResult, run_sfm
 from .static_check import MotionPrecheck, measure_motion
 from .trajectory_check import TrajectoryJudgement, judge_trajectory, median_point_depth
+from .world_frame import orient_reconstruction
 
-STAGE_VERSION = "1"
+STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
 MIN_FRAMES = 3
 
 
@@ -131,21 +132,12 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         fraction = check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
 
         t0 = time.perf_counter()
-        sparse = out / "sparse" / "0"
-        sparse.mkdir(parents=True)
-        rec.write(output_dir=sparse)
+        # a gravity- and wall-aligned world before anything is written, so every output shares it
+        frame = orient_reconstruction(rec) if cfg.orient else None
         # file_path relative to the final folder (not the atomic temp one): ns-train --data POSES resolves it
         transforms = transforms_dict(rec, frames.source_index, image_dir=frames.image_dir, out_dir=cfg.out_dir)
         warnings_ += intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
-        write_json(out / "transforms.json", transforms)
-        cloud = point_cloud(rec)
-        write_ply(cloud, out / "points3D.ply")
-        centres = np.array([f["transform_matrix"] for f in transforms["frames"]])[:, :3, 3]
-        box, box_info = scene_box(cloud, centres)
-        write_json(out / "scene.json", {"scene_box": box.tolist(), "units": "colmap",
-                                        "scene_box_rule": "open3d statistical outlier removal on points3D, "
-                                                          "grown to include the camera centres",
-                                        **box_info, "source": "livescene poses"})
+        write_model_outputs(out, rec, transforms, "livescene poses", None if frame is None else frame.as_dict())
         if cfg.keep_database:
             shutil.move(str(database), out / "database.db")
         shutil.rmtree(work)
@@ -184,7 +176,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
                        "min_registered": cfg.min_registered, "camera_model": cfg.camera_model,
                        "max_image_size": cfg.max_image_size, "max_num_features": cfg.max_num_features,
                        "sequential_overlap": cfg.sequential_overlap,
-                       "loop_detection": cfg.vocab_tree is not None},
+                       "loop_detection": cfg.vocab_tree is not None, "orient": cfg.orient},
+            "world_frame": None if frame is None else frame.as_dict(),
             "warnings": warnings_,
             "timings": timings,
         }

@@ -72,11 +72,14 @@ def test_import_matches_frames_by_number(capture: tuple[Path, Path], tmp_path: P
     assert [f["file_path"] for f in transforms["frames"]] == [f"../frames/images/{n}" for n in frame_names]
     assert all((out / f["file_path"]).is_file() for f in transforms["frames"])
     assert [f["source_index"] for f in transforms["frames"]] == NUMBERS
+    summary = json.loads((out / "poses.json").read_text())
+    # the model's poses, moved rigidly into the gravity- and wall-aligned world frame
+    new_from_old = np.vstack([summary["world_frame"]["new_from_old"], [0.0, 0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(new_from_old[:3, :3] @ new_from_old[:3, :3].T, np.eye(3), atol=1e-12)
     for frame, truth in zip(transforms["frames"], POSES, strict=True):
-        np.testing.assert_allclose(frame["transform_matrix"], truth, atol=1e-9)
+        np.testing.assert_allclose(frame["transform_matrix"], new_from_old @ truth, atol=1e-9)
     assert transforms["fl_x"] == SMALL_CAMERA.fx and transforms["w"] == SMALL_CAMERA.width
     assert (transforms["k1"], transforms["k2"]) == RADIAL_K
-    summary = json.loads((out / "poses.json").read_text())
     assert summary["source"] == "import"
     assert summary["imported_from"]["model"] == str((project / layout).resolve())
     assert summary["imported_from"]["format"] == ("binary" if binary else "text")
@@ -89,7 +92,7 @@ def test_import_matches_frames_by_number(capture: tuple[Path, Path], tmp_path: P
     cloud = o3d.io.read_point_cloud(str(out / "points3D.ply"))
     assert len(cloud.points) == summary["n_points3D"] == rec.num_points3D() > 50
     box = np.asarray(json.loads((out / "scene.json").read_text())["scene_box"])
-    centres = np.array([p[:3, 3] for p in POSES])
+    centres = np.array([(new_from_old @ p)[:3, 3] for p in POSES])
     assert (centres >= box[0] - 1e-9).all() and (centres <= box[1] + 1e-9).all()  # the box holds the cameras
     # the scene stage reads it (and nerfstudio would: see tests/nerfstudio_mirror.py)
     view = read_like_nerfstudio(out)
@@ -108,7 +111,10 @@ def test_import_output_is_read_by_the_scene_reader(capture: tuple[Path, Path], t
 def test_import_with_the_image_folder(capture: tuple[Path, Path], tmp_path: Path) -> None:
     source, _frames = capture
     out = tmp_path / "poses"
-    summary = import_model(ImportConfig(model_dir=_model(tmp_path, binary=False), out_dir=out, images_dir=source))
+    # orient=False (--no-orient): the model's own world frame, pose for pose
+    summary = import_model(ImportConfig(model_dir=_model(tmp_path, binary=False), out_dir=out, images_dir=source,
+                                        orient=False))
+    assert summary["world_frame"] is None
     transforms = json.loads((out / "transforms.json").read_text())
     assert [f["file_path"] for f in transforms["frames"]] == [os.path.relpath(source / n, out) for n in COLMAP_NAMES]
     assert all((out / f["file_path"]).is_file() for f in transforms["frames"])
