@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 from pathlib import Path
@@ -97,3 +98,38 @@ def test_masked_objects_get_no_features(room_poses: Path, room_sequence: Room, t
     for name, keypoints in masked.items():
         assert len(keypoints) > 50
         assert on_objects(keypoints, masks / name) == 0, name
+
+
+def _angle_to_axis_permutation(rotation: np.ndarray) -> float:
+    """Degrees between ``rotation`` and the nearest signed permutation of the axes (a proper rotation)."""
+    best = 180.0
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product([1.0, -1.0], repeat=3):
+            p = np.zeros((3, 3))
+            p[range(3), perm] = signs
+            if np.linalg.det(p) > 0:
+                cos = np.clip((np.trace(p.T @ rotation) - 1.0) / 2.0, -1.0, 1.0)
+                best = min(best, float(np.degrees(np.arccos(cos))))
+    return best
+
+
+def test_world_is_turned_to_the_room(room_poses: Path, room_sequence: Room, tmp_path: Path) -> None:
+    """The axis-aligned truth room comes out axis-aligned (COLMAP's own world is at an arbitrary angle)."""
+    _root, _masks, camera, poses = room_sequence
+    truth = tmp_path / "truth" / "transforms.json"
+    write_json(truth, {**camera_to_dict(camera), "frames": [
+        {"file_path": f"images/frame_{i:05d}.png", "transform_matrix": p.tolist()} for i, p in enumerate(poses)]})
+    sim3 = np.asarray(compare_poses(room_poses / "transforms.json", truth, extent=4.0)["sim3"])
+    rotation = sim3[:3, :3] / np.cbrt(np.linalg.det(sim3[:3, :3]))
+    assert _angle_to_axis_permutation(rotation) < 2.0
+    frame = json.loads((room_poses / "poses.json").read_text())["world_frame"]
+    assert frame == json.loads((room_poses / "scene.json").read_text())["world_frame"]
+    assert np.asarray(frame["new_from_old"]).shape == (3, 4)
+    # sparse/0 was turned with the exported poses: its camera centres are transforms.json's
+    rec = pycolmap.Reconstruction(room_poses / "sparse" / "0")
+    by_name = {img.name: img for img in rec.images.values()}
+    transforms = json.loads((room_poses / "transforms.json").read_text())
+    for f in transforms["frames"]:
+        image = by_name[Path(f["file_path"]).name]
+        centre = image.projection_center()
+        np.testing.assert_allclose(centre, np.asarray(f["transform_matrix"])[:3, 3], atol=1e-6)
