@@ -25,6 +25,7 @@ from .object_parts import ObjectPartFusion
 from .state_spec import full_state, state_slug
 from .thumbnail import overview_view, write_thumbnail
 from .tsdf_fusion import FusionSettings, TSDFFusion, fusable_depth
+from .world_up import world_up_axis
 
 EXPORT_FORMAT = 1
 """Version of export.json (bump when its keys change: the report reads it)."""
@@ -124,7 +125,7 @@ def _count(geometry: Any) -> dict[str, int]:
 
 def export_state(run: Renderable, views: Sequence[tuple[int, Camera, np.ndarray]], box: np.ndarray,
                  states: Mapping[str, float], options: ExportOptions, out_dir: Path,
-                 progress: bool = True) -> dict[str, Any]:
+                 progress: bool = True, up: str = "+y") -> dict[str, Any]:
     """Render, fuse and write one state combination into ``out_dir``; returns its export.json record."""
     t0 = time.perf_counter()
     voxel = float(np.max(box[1] - box[0])) / options.resolution
@@ -159,7 +160,7 @@ def export_state(run: Renderable, views: Sequence[tuple[int, Camera, np.ndarray]
     files: dict[str, dict[str, Any]] = {}
     for key, geom in geometry.items():
         rel = f"{key}.{options.fmt}"
-        size = write_geometry(out_dir / rel, geom)
+        size = write_geometry(out_dir / rel, geom, up=up)
         files[key] = {"path": f"{out_dir.name}/{rel}", "bytes": size, **_count(geom)}
     first_camera = views[0][1]
     thumb_cam, thumb_pose = overview_view(first_camera, [v[2] for v in views], options.thumbnail_width)
@@ -192,19 +193,20 @@ def export_run(run: Renderable, dataset: SceneDataset, combos: Sequence[Mapping[
     slugs = [state_slug(s) for s in full]
     if len(set(slugs)) != len(slugs):
         raise InputError("--states", "the same state combination is given twice", "give each combination once")
+    up = world_up_axis([f.c2w for f in dataset.frames])
     out = Path(out)
     records = []
     with atomic_dir(out) as tmp:
         for states, slug in zip(full, slugs, strict=True):
             (tmp / slug).mkdir()
-            record = export_state(run, views, box, states, options, tmp / slug, progress)
+            record = export_state(run, views, box, states, options, tmp / slug, progress, up=up)
             records.append(record)
         cam = render_camera(views[0][1], options.scale)
         doc = {
             "format": EXPORT_FORMAT, **dict(run_info or {}), "dataset": str(dataset.root),
             "objects": list(run.objects), "options": asdict(options),
             "views": len(views), "view_frames": [dataset.frames[i].frame_id for i, _, _ in views],
-            "render_size": [cam.width, cam.height], "box": box.tolist(),
+            "render_size": [cam.width, cam.height], "box": box.tolist(), "world_up": up,
             "voxel": float(np.max(box[1] - box[0])) / options.resolution,
             "exports": records, "total_seconds": round(time.perf_counter() - t0, 3),
             "loadavg": [round(x, 2) for x in os.getloadavg()],

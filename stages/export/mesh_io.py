@@ -7,7 +7,8 @@ third larger), declares the index accessor's max as the index COUNT minus one, a
 reader (assimp) cannot read the file back. The GLB writer below follows the glTF 2.0 binary
 layout: one JSON chunk, one BIN chunk, uint32 indices, float32 positions (with the required min/max) and normals, and
 normalised uint8 RGBA vertex colours. Coordinates stay in the dataset's world in every format, so
-the parts of one export and the exports of different states line up.
+the parts of one export and the exports of different states line up. glTF's up is +y; a GLB's node
+carries the rotation that takes the world's up axis there (``up``), leaving the stored positions alone.
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ _GLB_MAGIC, _CHUNK_JSON, _CHUNK_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 _FLOAT, _UINT, _UBYTE = 5126, 5125, 5121
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 _POINTS, _TRIANGLES = 0, 4
+_H = float(np.sqrt(0.5))
+UP_TO_GLTF_Y = {"+y": None, "-y": [1.0, 0.0, 0.0, 0.0], "+z": [-_H, 0.0, 0.0, _H], "-z": [_H, 0.0, 0.0, _H],
+                "+x": [0.0, 0.0, _H, _H], "-x": [0.0, 0.0, -_H, _H]}
+"""Node rotation (unit quaternion x, y, z, w) turning a world whose up is the named axis to glTF's +y up."""
 
 
 def mesh_arrays(mesh: o3d.geometry.TriangleMesh) -> dict[str, np.ndarray]:
@@ -45,7 +50,7 @@ def points_arrays(points: o3d.geometry.PointCloud) -> dict[str, np.ndarray]:
             "colors": np.asarray(points.colors, dtype=np.float32).reshape(-1, 3)}
 
 
-def _glb_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+def _glb_bytes(arrays: dict[str, np.ndarray], up: str = "+y") -> bytes:
     pos = arrays["positions"]
     n = len(pos)
     doc: dict = {"asset": {"version": "2.0", "generator": "livescene export"}, "scene": 0,
@@ -89,7 +94,10 @@ def _glb_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     while blob.tell() % 4:
         blob.write(b"\0")
     body = blob.getvalue()
-    doc.update({"nodes": [{"mesh": 0}], "meshes": [{"primitives": [primitive]}], "accessors": accessors,
+    node: dict = {"mesh": 0}
+    if UP_TO_GLTF_Y[up] is not None:
+        node["rotation"] = UP_TO_GLTF_Y[up]
+    doc.update({"nodes": [node], "meshes": [{"primitives": [primitive]}], "accessors": accessors,
                 "bufferViews": views, "buffers": [{"byteLength": len(body)}]})
     return _glb_pack(doc, body)
 
@@ -202,8 +210,14 @@ def _ply_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     return ("\n".join([*header, "end_header"]) + "\n").encode("ascii") + body
 
 
-def write_geometry(path: str | Path, geometry: o3d.geometry.TriangleMesh | o3d.geometry.PointCloud) -> int:
-    """Write a mesh or point cloud in the format of ``path``'s suffix (.ply/.obj/.glb); returns bytes written."""
+def write_geometry(path: str | Path, geometry: o3d.geometry.TriangleMesh | o3d.geometry.PointCloud,
+                   up: str = "+y") -> int:
+    """Write a mesh or point cloud in the format of ``path``'s suffix (.ply/.obj/.glb); returns bytes written.
+
+    ``up`` (a key of ``UP_TO_GLTF_Y``) is the world's up axis: a GLB's node turns it to glTF's +y.
+    """
+    if up not in UP_TO_GLTF_Y:
+        raise ValueError(f"up axis {up!r}; choose one of {sorted(UP_TO_GLTF_Y)}")
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower()
     if fmt not in FORMATS:
@@ -214,7 +228,7 @@ def write_geometry(path: str | Path, geometry: o3d.geometry.TriangleMesh | o3d.g
         if fmt == "ply":
             tmp.write_bytes(_ply_bytes(arrays))
         elif fmt == "glb":
-            tmp.write_bytes(_glb_bytes(arrays))
+            tmp.write_bytes(_glb_bytes(arrays, up))
         else:
             tmp.write_text(_obj_text(arrays))
     return path.stat().st_size

@@ -16,6 +16,7 @@ from stages.export import ExportOptions, export_run, read_glb
 from stages.export.cli import main as export_main
 from stages.export.geometry_compare import chamfer_distance, inside_box
 from stages.export.state_spec import parse_state_string
+from stages.export.world_up import world_up_axis
 from stages.report.export_section import section_export
 from stages.scene import InputError
 
@@ -84,6 +85,7 @@ def test_export_json_records_sizes_counts_timings_and_thumbnails(drawer_export):
     assert json.loads((out / "export.json").read_text()) == json.loads(json.dumps(doc))
     assert doc["objects"] == ["cabinet", "drawer"] and doc["views"] == len(ds.frames_in("train"))
     assert [r["states"] for r in doc["exports"]] == [{"cabinet": 0.0, "drawer": 0.0}, {"cabinet": 0.0, "drawer": 1.0}]
+    assert doc["world_up"] == world_up_axis([f.c2w for f in ds.frames])
     for record in doc["exports"]:
         for key, entry in record["files"].items():
             path = out / entry["path"]
