@@ -28,7 +28,7 @@ import pycolmap
 
 from stages.scene import InputError, frame_id_of
 
-from .conventions import rotation_angle_deg
+from .conventions import axis_misalignment_deg, rotation_angle_deg
 from .frame_matching import match_frames
 from .pose_sources import PoseEntry, read_pose_set
 
@@ -139,6 +139,8 @@ def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None
         "sim3": sim3.tolist(),
         "sim3_note": "maps reference (truth) world coordinates to predicted world coordinates: x_pred = sim3 @ x_truth",
         "scale": scale,
+        "axes_misalignment_deg": axis_misalignment_deg(rot),
+        "axes_note": "angle between the two worlds' axes up to relabelling and sign (0 = axis-aligned alike)",
         "scene_extent": extent_value,
         "scene_extent_source": extent_source,
         "centre_error_relative": _stats(centre_rel),
@@ -171,4 +173,5 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         f"rotation error (deg): mean {r['mean']:.3f}, median {r['median']:.3f}, max {r['max']:.3f}",
         f"focal length error: fx {f['relative_fx']:.2%}, fy {f['relative_fy']:.2%} "
         f"(pred {f['pred_fx_at_truth_size']:.1f} vs truth {f['truth_fx']:.1f} px)",
+        f"world axes against the reference's (up to relabelling and sign): {report['axes_misalignment_deg']:.2f} deg",
     ]

@@ -11,6 +11,8 @@ world (COLMAP's, turned upright by world_frame.py unless --no-orient).
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from stages.scene import opencv_to_opengl, opengl_to_opencv
@@ -56,3 +58,19 @@ def rotation_angle_deg(r_a: np.ndarray, r_b: np.ndarray) -> float:
     from scipy.spatial.transform import Rotation
 
     return float(np.degrees(Rotation.from_matrix(np.asarray(r_a).T @ np.asarray(r_b)).magnitude()))
+
+
+def axis_misalignment_deg(rotation: np.ndarray) -> float:
+    """Degrees between ``rotation`` and the nearest proper signed permutation of the axes.
+
+    0 when two worlds share their axes up to relabelling and sign (all an axis-aligned factorisation cares
+    about); used to judge the poses stage's upright world against a reference (docs/poses.md, "World frame").
+    """
+    best = 180.0
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            p = np.zeros((3, 3))
+            p[range(3), perm] = signs
+            if np.linalg.det(p) > 0:
+                best = min(best, rotation_angle_deg(p, rotation))
+    return best

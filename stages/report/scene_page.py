@@ -100,6 +100,13 @@ def section_poses(sd: SceneData) -> str:
             ["COLMAP seconds", fmt((p.get("timings") or {}).get("total"), 1)]]
     if p.get("source") == "import":
         rows.append(["source", "imported COLMAP model (no SfM)"])
+    w = p.get("world_frame")
+    if w:  # docs/poses.md, "World frame"
+        rows.append(["world frame", f"turned upright: up from {escape(str(w.get('up_source')))} "
+                     f"({fmt(w.get('up_tilt_deg'), 1)} deg from the cameras' up), x and y from "
+                     f"{escape(str(w.get('yaw_source')))} (strength {fmt(w.get('yaw_strength'), 2)})"])
+    elif "world_frame" in p:
+        rows.append(["world frame", "COLMAP's, as the mapper left it (--no-orient)"])
     t = p.get("trajectory") or {}
     if t:  # the numbers the pose gate judged (docs/poses.md, "Quality gate")
         reason = f": {escape(t['reason'])}" if t.get("reason") else ""
@@ -122,7 +129,8 @@ def section_poses(sd: SceneData) -> str:
                 ["rotation error deg (mean, max)",
                  f"{fmt(e['rotation_error_deg']['mean'], 2)}, {fmt(e['rotation_error_deg']['max'], 2)}"],
                 ["focal error (relative fx)", f"{fmt(100 * fe['relative_fx'], 2)} %" if "relative_fx" in fe else "–"],
-                ["alignment scale (truth -> COLMAP)", fmt(e.get("scale"))]]
+                ["alignment scale (truth -> COLMAP)", fmt(e.get("scale"))],
+                ["world axes against the truth's (deg, up to relabelling)", fmt(e.get("axes_misalignment_deg"), 2)]]
         html += "<h3>Against the truth</h3>" + table(["pose error", "value"], rows)
     return html
 

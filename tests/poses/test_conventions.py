@@ -52,3 +52,13 @@ def test_rotation_angle() -> None:
     turn = Rotation.from_rotvec([0.0, np.radians(7.0), 0.0]).as_matrix()
     assert rotation_angle_deg(a, a @ turn) == pytest.approx(7.0, abs=1e-9)
     assert rotation_angle_deg(a, a) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_axis_misalignment_is_zero_for_relabelled_axes_and_the_angle_otherwise():
+    from stages.poses.conventions import axis_misalignment_deg
+
+    swap = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])  # x->y->z->x: relabelling only
+    assert axis_misalignment_deg(swap) == pytest.approx(0.0, abs=1e-9)
+    for deg in (3.0, 17.0, 40.0):  # one turn about z: the nearest relabelling is within 45 degrees of it
+        turned = Rotation.from_euler("z", deg, degrees=True).as_matrix()
+        assert axis_misalignment_deg(swap @ turned) == pytest.approx(min(deg, 90.0 - deg), abs=1e-6)

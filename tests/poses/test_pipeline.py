@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import json
 import os
 from pathlib import Path
@@ -15,6 +14,7 @@ import pytest
 from poses_testdata import SMALL_CAMERA
 
 from stages.poses import PosesConfig, compare_poses, estimate_poses
+from stages.poses.conventions import axis_misalignment_deg
 from stages.poses.sfm import extract_features
 from stages.scene import Camera, write_json
 from stages.scene.transforms import camera_to_dict
@@ -100,28 +100,17 @@ def test_masked_objects_get_no_features(room_poses: Path, room_sequence: Room, t
         assert on_objects(keypoints, masks / name) == 0, name
 
 
-def _angle_to_axis_permutation(rotation: np.ndarray) -> float:
-    """Degrees between ``rotation`` and the nearest signed permutation of the axes (a proper rotation)."""
-    best = 180.0
-    for perm in itertools.permutations(range(3)):
-        for signs in itertools.product([1.0, -1.0], repeat=3):
-            p = np.zeros((3, 3))
-            p[range(3), perm] = signs
-            if np.linalg.det(p) > 0:
-                cos = np.clip((np.trace(p.T @ rotation) - 1.0) / 2.0, -1.0, 1.0)
-                best = min(best, float(np.degrees(np.arccos(cos))))
-    return best
-
-
 def test_world_is_turned_to_the_room(room_poses: Path, room_sequence: Room, tmp_path: Path) -> None:
     """The axis-aligned truth room comes out axis-aligned (COLMAP's own world is at an arbitrary angle)."""
     _root, _masks, camera, poses = room_sequence
     truth = tmp_path / "truth" / "transforms.json"
     write_json(truth, {**camera_to_dict(camera), "frames": [
         {"file_path": f"images/frame_{i:05d}.png", "transform_matrix": p.tolist()} for i, p in enumerate(poses)]})
-    sim3 = np.asarray(compare_poses(room_poses / "transforms.json", truth, extent=4.0)["sim3"])
+    report = compare_poses(room_poses / "transforms.json", truth, extent=4.0)
+    sim3 = np.asarray(report["sim3"])
     rotation = sim3[:3, :3] / np.cbrt(np.linalg.det(sim3[:3, :3]))
-    assert _angle_to_axis_permutation(rotation) < 2.0
+    assert report["axes_misalignment_deg"] == pytest.approx(axis_misalignment_deg(rotation)) and \
+        report["axes_misalignment_deg"] < 2.0
     frame = json.loads((room_poses / "poses.json").read_text())["world_frame"]
     assert frame == json.loads((room_poses / "scene.json").read_text())["world_frame"]
     assert np.asarray(frame["new_from_old"]).shape == (3, 4)
