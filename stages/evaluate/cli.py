@@ -32,7 +32,7 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     p.add_argument("--max-views", type=int, default=None, help="held-out views to evaluate (default: all)")
     p.add_argument("--unseen-views", type=int, default=3, help="held-out poses for unseen combinations")
     p.add_argument("--levels", default="0,0.5,1", help="levels of the unseen-combination test")
-    p.add_argument("--locality-views", type=int, default=2,
+    p.add_argument("--locality-views", type=int, default=8,
                    help="held-out poses of the locality test (needs --truth; 0 = skip)")
     p.add_argument("--novelty-min", type=float, default=0.25,
                    help="least L-inf distance to training states for a combination to count as unseen")

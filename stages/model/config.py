@@ -84,6 +84,10 @@ class ProbabilityConfig:
     """Samples whose best object probability is below this get k = static_value (reference ships 0 = off)."""
     static_value: float = 0.0
     """The 4th coordinate of rejected samples (reference code: 0)."""
+    state_input: Literal["all", "none"] = "all"
+    """What the decoder reads besides the features: ``all`` = the whole state vector (reference code), ``none`` =
+    nothing, so an object's region is the space it sweeps over all its states and no state change moves any
+    sample to another object (docs/method.md section 2)."""
 
 
 @dataclass

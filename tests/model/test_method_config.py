@@ -31,3 +31,11 @@ def test_workflow_and_compare_train_the_same_config():
             trained = load_config(scale, method=method).to_dict()  # what `livescene train --method` builds
             compared = method_preset(method, scale)  # what `livescene compare` trains
             assert compared["model"] == trained["model"] and compared["train"] == trained["train"], (method, scale)
+
+
+def test_livescene_alone_reads_no_state_in_its_probability_field_at_cpu_demo():
+    """LiveScene's cpu-demo overlay (docs/model.md, "Locality and the probability field's state input")."""
+    assert load_config("cpu-demo", method="livescene").model.probability.state_input == "none"
+    assert load_config("gpu-paper", method="livescene").model.probability.state_input == "all"  # the reference
+    for method in ("mk-planes", "conerf"):
+        assert load_config("cpu-demo", method=method).model.probability.state_input == "all"

@@ -86,3 +86,16 @@ def test_one_state_for_every_ray_gives_the_per_ray_result_and_gradients():
         grads.append([p.grad.clone() for p in field.parameters()])
     for a, b in zip(*grads, strict=True):
         assert torch.allclose(a, b, atol=1e-5)
+
+
+def test_state_input_none_gives_every_state_the_same_regions():
+    """``state_input: none``: an object's region is its swept space, so no state change reassigns a sample."""
+    torch.manual_seed(3)
+    pos = torch.rand(64, 3) * 2 - 1
+    before, after = torch.tensor([[0.1, 0.5, 0.7]]), torch.tensor([[0.9, 0.0, 1.0]])
+    for mode, moves in (("none", False), ("all", True)):
+        field = ProbabilityField(ProbabilityConfig(resolution=8, channels=4, hidden=8, state_input=mode), n_objects=3)
+        assert field.decoder[0].in_features == 4 + (3 if mode == "all" else 0)
+        for a, b in ((field(pos, before.expand(64, 3)), field(pos, after.expand(64, 3))),
+                     (field(pos, before.repeat(64, 1)), field(pos, after.repeat(64, 1)))):
+            assert torch.isfinite(a).all() and (not torch.allclose(a, b, atol=1e-6)) == moves

@@ -70,8 +70,22 @@ def control_commands(wildcards):
     return config["commands"]
 
 
+# the checkout holding workflow/ and config/: two levels above this file; relative, so a moved clone reruns nothing
+MODEL_CONFIG_DIR = Path(os.path.relpath(Path(workflow.current_basedir).parents[1])) / "config" / "model"
+
+
+def model_config_files(method):
+    """The preset and the method's overlay on it (config/model/methods/): editing either retrains the method."""
+    preset = str(config["preset"])
+    files = {"preset": preset if preset.endswith((".yaml", ".yml")) else str(MODEL_CONFIG_DIR / f"{preset}.yaml")}
+    overlay = MODEL_CONFIG_DIR / "methods" / f"{method}.yaml"
+    if overlay.is_file():
+        files["method_config"] = str(overlay)
+    return files
+
+
 def train_input(wildcards):
-    files = dataset_input(wildcards)
+    files = dataset_input(wildcards) | model_config_files(wildcards.method)
     if wildcards.method == "livescene" and has_names(wildcards.scene):
         files["targets"] = R(wildcards.scene, "language", "targets.npz")
     return files

@@ -28,7 +28,9 @@ class ProbabilityField(nn.Module):
         self.n_objects = n_objects
         r = config.resolution
         self.encoding = KPlanesEncoding([r, r, r], config.channels, None, 3, config.init_range)
-        self.decoder = mlp(config.channels + n_objects, config.hidden, 1, n_objects + 1)
+        # with state_input "none" the states are not an input: n_inputs = 0
+        self.n_inputs = n_objects if config.state_input == "all" else 0
+        self.decoder = mlp(config.channels + self.n_inputs, config.hidden, 1, n_objects + 1)
 
     def forward(self, positions: torch.Tensor, states: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``positions`` [N, 3] and ``states`` [N, alpha], or [R, alpha] per ray with N = R x samples -> [N, alpha + 1].
@@ -42,10 +44,10 @@ class ProbabilityField(nn.Module):
         c = features.shape[-1]
         n, r = features.shape[0], states.shape[0]
         # one state vector for every ray (a rendered view): its term is a constant, folded into the bias
-        shared = self.n_objects > 0 and r < n and states.stride(0) == 0
+        shared = self.n_inputs > 0 and r < n and states.stride(0) == 0
         bias = first.bias + F.linear(states[0].to(features.dtype), first.weight[:, c:]) if shared else first.bias
         h = F.linear(features, first.weight[:, :c], bias)
-        if self.n_objects > 0 and not shared:
+        if self.n_inputs > 0 and not shared:
             hs = F.linear(states.to(h.dtype), first.weight[:, c:])
             # in place: a broadcast add into a new [N, hidden] array costs as much as the layer itself
             (h if r == n else h.view(r, n // r, -1)).add_(hs if r == n else hs[:, None, :])
