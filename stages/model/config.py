@@ -369,6 +369,8 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
     top = {k: os.fspath(v) if isinstance(v, os.PathLike) else v for k, v in top.items() if v is not None}
     from_mapping(RunConfig, top, path="load_config")
     method = top.get("method") or next((v for _, k, v in reversed(parsed) if k == ["method"]), data.get("method"))
+    # no method named: the config trains the default method, so it gets that method's overlay too
+    method = method or RunConfig.method
     if method:  # the overlay sits between the preset and the explicit overrides, which win
         overlay = method_overlay(str(method), path.stem)
         from_mapping(RunConfig, overlay, path=METHOD_DIR / f"{method}.yaml", root=path.stem)
