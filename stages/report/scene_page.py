@@ -274,8 +274,20 @@ def section_verdict(sd: SceneData) -> str:
     return ("<p>LiveScene minus the baseline on the same items (same views, same unseen state vectors, same "
             "grounding queries and views): mean difference and its 95% Student-t interval. A verdict says "
             "ahead or behind only when the interval excludes 0; higher is better for every metric here.</p>"
+            + _seed_caveat(sd)
             + _flag_banner(flags)
             + table(["baseline", "paired metric", "n", "mean difference", "95% CI", "verdict"], rows))
+
+
+def _seed_caveat(sd: SceneData) -> str:
+    """Which training each method's items come from: the interval spans views and queries, not training seeds."""
+    seeds = {m.name: (m.run or {}).get("seed", (m.config or {}).get("seed")) for m in sd.methods if m.metrics}
+    told = ", ".join(f"{escape(n)} seed {escape(str(s))}" for n, s in seeds.items() if s is not None)
+    return ("<p class=\"note\">Each method was trained once" + (f" ({told})" if told else "")
+            + ": the intervals cover the spread over views and queries of that training, not over training "
+            "seeds. Another seed can move a method's held-out PSNR by a few tenths of a dB (docs/model.md, "
+            "\"Locality and the probability field's state input\"), so a verdict by a margin that small is "
+            "one training's.</p>")
 
 
 def _eval_series(sd: SceneData, axis: str) -> list[Series]:

@@ -190,6 +190,7 @@ def test_page_and_summary_carry_the_verdict_and_the_flags(tmp_path, tiny_dataset
     verdict_html = html.split('<section id="verdict">')[1].split("</section>")[0]
     assert "LiveScene behind" in verdict_html and "LiveScene ahead" in verdict_html
     assert "rests on a flagged run: conerf (undertrained)" in verdict_html
+    assert "livescene seed 0, conerf seed 0" in verdict_html and "not over training seeds" in verdict_html
     methods_html = html.split('<section id="methods">')[1].split("</section>")[0]
     assert 'class="flag"' in methods_html and "401 steps &lt; trust.min_steps" in methods_html
     assert methods_html.index("&#9888; undertrained") < methods_html.index("21.000")  # the flag sits by the numbers
