@@ -140,6 +140,38 @@ def focal_mask_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, gamma: 
     return _masked_mean(0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce, valid)
 
 
+def focal_mask_loss_probs(rendered_probs: torch.Tensor, labels: torch.Tensor, gamma: float = 1.5) -> torch.Tensor:
+    """The focal mask loss of rendered probabilities [R, C] (weights times per-sample softmax, summed along the ray).
+
+    The rendered sum is divided by the ray's total weight, so a ray that leaves the box half transparent is
+    judged by the samples it has; CE is ``-log`` of the label's share, floored to keep it finite.
+    """
+    valid = labels >= 0
+    p = rendered_probs.float()
+    p = p / p.sum(dim=-1, keepdim=True).clamp(min=1e-6)
+    p_label = p.gather(1, labels.clamp(min=0)[:, None])[:, 0].clamp(min=1e-6)
+    ce = -torch.log(p_label)
+    return _masked_mean(0.5 * (1.0 - p_label) ** gamma * ce, valid)
+
+
+def focal_mask_loss_samples(weights: torch.Tensor, logits: torch.Tensor, labels: torch.Tensor,
+                            gamma: float = 1.5) -> torch.Tensor:
+    """Every sample's focal CE against its ray's label, weighted by the (detached) rendering weights [R, S].
+
+    ``logits`` [R, S, C]. Per ray the weighted sum is divided by the ray's total weight. Unlike the rendered
+    forms, a sample that carries weight cannot hide behind another sample's extreme logit, and a confidently
+    wrong sample still gets a gradient.
+    """
+    valid = labels >= 0
+    n_rays, n_samples, n_classes = logits.shape
+    target = labels.clamp(min=0)[:, None].expand(n_rays, n_samples).reshape(-1)
+    ce = F.cross_entropy(logits.reshape(-1, n_classes).float(), target, reduction="none")
+    focal = (0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce).view(n_rays, n_samples)
+    w = weights.detach().float()
+    per_ray = (w * focal).sum(-1) / w.sum(-1).clamp(min=1e-6)
+    return _masked_mean(per_ray, valid)
+
+
 def repulsion_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, margin: float = 10.0) -> torch.Tensor:
     """``ELU(K - d) + 1`` with ``d`` the mean L1 distance of the rendered logits of ray pairs with different labels.
 

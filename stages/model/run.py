@@ -4,7 +4,8 @@
 in the DATASET's world coordinates (OpenGL camera axes) and returns numpy
 arrays: ``rgb`` [H, W, 3], ``depth`` [H, W] (distance along the ray, dataset
 units), ``accumulation`` [H, W], ``probs`` [H, W, alpha + 1] (softmax of the
-rendered final-level logits, background last) and ``language`` [H, W, D] when
+rendered final-level logits, or the rendered probabilities where the mask loss
+trains those, background last) and ``language`` [H, W, D] when
 the run was trained with language targets.
 
 ``open_run`` and ``dataset_of_run`` are how the commands that take ``--run``
@@ -135,7 +136,9 @@ class LoadedRun:
                 parts.setdefault("depth", []).append(out["depth"] / self.norm.scale)
             if "accumulation" in out:
                 parts.setdefault("accumulation", []).append(out["accumulation"])
-            if "logits" in out:
+            if "probs" in out:  # rendered probabilities (losses.focal_mask_on), by the ray's weight
+                parts.setdefault("probs", []).append(out["probs"] / out["probs"].sum(-1, keepdim=True).clamp(min=1e-6))
+            elif "logits" in out:
                 parts.setdefault("probs", []).append(torch.softmax(out["logits"], dim=-1))
             if "language" in out:
                 parts.setdefault("language", []).append(F.normalize(out["language"], dim=-1))

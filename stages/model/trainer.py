@@ -437,7 +437,7 @@ class Trainer:
             n += batch.rgb.numel()
             if alpha and "logits" in out:
                 valid = batch.labels >= 0
-                pred, gt = out["logits"].argmax(-1)[valid].cpu(), batch.labels[valid].cpu()
+                pred, gt = out.get("probs", out["logits"]).argmax(-1)[valid].cpu(), batch.labels[valid].cpu()
                 for c in range(alpha):
                     inter[c] += float(((pred == c) & (gt == c)).sum())
                     union[c] += float(((pred == c) | (gt == c)).sum())

@@ -273,7 +273,8 @@ def section_verdict(sd: SceneData) -> str:
         rows.append([escape(r.baseline), escape(r.label), r.n, mean, _interval(r.ci95, r.unit), cell])
     return ("<p>LiveScene minus the baseline on the same items (same views, same unseen state vectors, same "
             "grounding queries and views): mean difference and its 95% Student-t interval. A verdict says "
-            "ahead or behind only when the interval excludes 0; higher is better for every metric here.</p>"
+            "ahead or behind only when the interval excludes 0; higher is better for every metric "
+            "but those marked lower is better.</p>"
             + _seed_caveat(sd)
             + _flag_banner(flags)
             + table(["baseline", "paired metric", "n", "mean difference", "95% CI", "verdict"], rows))

@@ -133,6 +133,27 @@ def test_probability_field_runs_at_every_level_only_where_the_field_reads_it(met
         assert torch.equal(out["rgb"], full["rgb"]) and torch.equal(out["logits"], full["logits"])
 
 
+@pytest.mark.parametrize(("mode", "key"), [("probabilities", "level_probs"), ("samples", "level_samples")])
+def test_focal_mask_forms_supervise_every_level(mode, key, tiny_overrides, monkeypatch):
+    """``losses.focal_mask_on`` other than logits: every level feeds that form, and ``probs`` is what it trains."""
+    cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]",
+                                   f"model.losses.focal_mask_on={mode}"]).model
+    model = build_model("livescene", cfg, _info(2)).train()
+    rays = _rays(16, 2)
+    out = model(rays, step=300, generator=torch.Generator().manual_seed(0))
+    assert len(out[key]) == len(out["level_logits"]) == len(model.proposal_fields) + 1
+    # weights times probabilities: at most the ray's weight per class, summing to it
+    assert out["probs"].shape == (16, 3) and (out["probs"] >= 0).all() and (out["probs"].sum(-1) <= 1 + 1e-5).all()
+    labels = torch.randint(0, 3, (16,), generator=torch.Generator().manual_seed(1))
+    batch = RayBatch(rays, torch.rand(16, 3), labels, torch.zeros(16, dtype=torch.long))
+    monkeypatch.setattr("stages.model.losses.focal_mask_loss",
+                        lambda *a, **k: pytest.fail("the logits form must not run"))
+    terms = model.loss_dict(out, batch, 300)
+    assert torch.isfinite(terms["focal_mask"]) and terms["focal_mask"].item() > 0
+    terms["focal_mask"].backward()
+    assert model.probability_field.decoder[-1].weight.grad.abs().sum() > 0
+
+
 @pytest.mark.parametrize("method", ["mk-planes", "mk-planes-star", "conerf", "k-planes"])
 def test_method_trains_and_renders(method, tiny_dataset, tiny_config, tmp_path):
     out = tmp_path / method

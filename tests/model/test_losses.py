@@ -84,6 +84,49 @@ def test_focal_mask_loss():
     assert L.focal_mask_loss(uniform, torch.tensor([-1])).item() == 0  # unlabelled rays are skipped
 
 
+def test_focal_mask_loss_on_probabilities():
+    # one sample of weight 1 per ray: rendered probabilities are the sample's softmax, and the loss is the focal form
+    logits = torch.randn(6, 4) * 3
+    labels = torch.tensor([0, 1, 2, 3, 1, -1])
+    probs = torch.softmax(logits, -1)
+    assert L.focal_mask_loss_probs(probs, labels).item() == pytest.approx(
+        L.focal_mask_loss(logits, labels).item(), rel=1e-5)
+    # judged by the ray's own weight: half-transparent rays count as their samples say
+    assert L.focal_mask_loss_probs(0.5 * probs, labels).item() == pytest.approx(
+        L.focal_mask_loss_probs(probs, labels).item(), rel=1e-5)
+    assert L.focal_mask_loss_probs(probs, torch.full((6,), -1)).item() == 0  # unlabelled rays are skipped
+    # the failure the option exists for: the surface (weight 0.9) is class 0, a floater (weight 0.06) has an extreme
+    # logit against class 0; the rendered logits call the ray class 1 and their loss for label 1 is small, while
+    # the rendered probabilities say the weight-carrying samples are class 0
+    sample_logits = torch.tensor([[[6.0, 2.0, 0.0], [-60.0, 10.0, 0.0]]])
+    weights = torch.tensor([[0.9, 0.06]])
+    rendered_logits = (weights[..., None] * sample_logits).sum(1)
+    rendered_probs = (weights[..., None] * torch.softmax(sample_logits, -1)).sum(1)
+    label1 = torch.tensor([1])
+    assert rendered_logits.argmax(-1).item() == 1 and L.focal_mask_loss(rendered_logits, label1).item() < 0.1
+    assert L.focal_mask_loss_probs(rendered_probs, label1).item() > 1.0
+
+
+def test_focal_mask_loss_on_samples():
+    # one sample per ray: the per-sample form is the focal loss of that sample's logits
+    logits = torch.randn(6, 1, 4) * 3
+    labels = torch.tensor([0, 1, 2, 3, 1, -1])
+    ones = torch.ones(6, 1)
+    assert L.focal_mask_loss_samples(ones, logits, labels).item() == pytest.approx(
+        L.focal_mask_loss(logits[:, 0], labels).item(), rel=1e-5)
+    # the floater case of test_focal_mask_loss_on_probabilities: the surface sample of class 0 carries the weight, so
+    # label 1 costs what the surface's own CE costs, however extreme the floater's logit
+    sample_logits = torch.tensor([[[6.0, 2.0, 0.0], [-60.0, 10.0, 0.0]]])
+    weights = torch.tensor([[0.9, 0.06]])
+    surface = L.focal_mask_loss(sample_logits[:, 0], torch.tensor([1])).item()
+    got = L.focal_mask_loss_samples(weights, sample_logits, torch.tensor([1])).item()
+    assert got == pytest.approx((0.9 * surface + 0.06 * 0.0) / 0.96, rel=1e-3) and got > 1.0
+    # a confidently wrong sample still has a gradient (the rendered-probability form's vanishes)
+    lg = torch.tensor([[[30.0, -30.0, 0.0]]], requires_grad=True)
+    L.focal_mask_loss_samples(torch.ones(1, 1), lg, torch.tensor([1])).backward()
+    assert lg.grad.abs().sum() > 0.1
+
+
 def test_repulsion_loss():
     labels = torch.tensor([0, 1, 1, 1])  # pairs (0, 1, differ) and (1, 1, same)
     far = torch.tensor([[30.0, 0.0], [0.0, 0.0], [0.0, 30.0], [0.0, 0.0]])  # differ by 30 in both label channels

@@ -215,6 +215,9 @@ class LiveSceneModel(nn.Module):
             out["accumulation"] = render_accumulation(w)
         if "logits" in outputs:
             out["logits"] = render_features(w.detach(), final["logits"])
+            if self.config.losses.focal_mask_on != "logits":
+                # what the mask loss trains is what the relevancy maps show (weights x per-sample softmax)
+                out["probs"] = render_features(w.detach(), torch.softmax(final["logits"].float(), -1))
         if "language" in outputs and self.language_table is not None:
             out["language"] = self.render_language(w, final["logits"], states, rays.times)
         if training:
@@ -224,9 +227,24 @@ class LiveSceneModel(nn.Module):
             out["level_logits"] = [render_features(lv["weights"].detach(), lv["logits"])
                                    for _, lv in levels if "logits" in lv]
             out["level_logits"].append(out["logits"])
+            if self.config.losses.focal_mask_on == "samples":
+                out["level_samples"] = [(lv["weights"], lv["logits"]) for _, lv in [*levels, (samples, final)]
+                                        if "logits" in lv]
+            elif self.config.losses.focal_mask_on == "probabilities":
+                out["level_probs"] = [render_features(lv["weights"].detach(), torch.softmax(lv["logits"].float(), -1))
+                                      for _, lv in levels if "logits" in lv] + [out["probs"]]
         return out
 
     # -- losses ---------------------------------------------------------------------------------------------
+    @staticmethod
+    def _focal_mask(out: dict, labels: torch.Tensor) -> torch.Tensor:
+        """The focal mask loss summed over every level whose logits exist, in the form ``focal_mask_on`` names."""
+        if "level_samples" in out:
+            return sum(L.focal_mask_loss_samples(w, lg, labels) for w, lg in out["level_samples"])
+        if "level_probs" in out:
+            return sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
+        return sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
+
     def loss_dict(self, out: dict, batch: RayBatch, step: int,
                   language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:
         """Every weighted loss term (terms with weight 0 are left out)."""
@@ -255,7 +273,7 @@ class LiveSceneModel(nn.Module):
             lambda: sum(L.k_smoothness(p.encoding) for p in self.proposal_fields))
         if self.info.n_objects > 0:
             add("focal_mask", w.focal_mask,
-                lambda: sum(L.focal_mask_loss(lg, batch.labels) for lg in out["level_logits"]))
+                lambda: self._focal_mask(out, batch.labels))
             add("repulsion", w.repulsion,
                 lambda: sum(L.repulsion_loss(lg, batch.labels, w.repulsion_margin) for lg in out["level_logits"]))
         if "language" in out and language is not None:
