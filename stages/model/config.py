@@ -174,11 +174,11 @@ class LossWeights:
     """Second-difference smoothness along k, proposal fields."""
     focal_mask: float = 1e-3
     """Focal cross-entropy of rendered logits against mask labels, every level."""
-    focal_mask_on: Literal["logits", "probabilities", "samples"] = "logits"
+    focal_mask_on: Literal["logits", "probabilities", "samples", "both"] = "logits"
     """What the focal mask loss judges along a ray: ``logits`` the rendered logits (the reference; one
     low-weight sample with an extreme logit can outvote the surface), ``probabilities`` the rendered
-    per-sample probabilities, ``samples`` every sample's own focal CE weighted by its rendering weight
-    (docs/method.md section 5)."""
+    per-sample probabilities, ``samples`` every sample's own focal CE weighted by its rendering weight,
+    ``both`` the logits and the probabilities forms summed (docs/method.md section 5)."""
     repulsion: float = 1e-3
     """Repulsion of rendered logits of ray pairs with different labels."""
     repulsion_margin: float = 10.0

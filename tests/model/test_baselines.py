@@ -154,6 +154,24 @@ def test_focal_mask_forms_supervise_every_level(mode, key, tiny_overrides, monke
     assert model.probability_field.decoder[-1].weight.grad.abs().sum() > 0
 
 
+def test_focal_mask_both_sums_the_forms_and_keeps_logit_relevancy(tiny_overrides):
+    """``focal_mask_on: both``: the probabilities form plus the reference's, relevancy from the rendered logits."""
+    def run(mode):
+        cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]",
+                                       f"model.losses.focal_mask_on={mode}"]).model
+        torch.manual_seed(0)
+        model = build_model("livescene", cfg, _info(2)).train()
+        rays = _rays(16, 2)
+        out = model(rays, step=300, generator=torch.Generator().manual_seed(0))
+        labels = torch.randint(0, 3, (16,), generator=torch.Generator().manual_seed(1))
+        batch = RayBatch(rays, torch.rand(16, 3), labels, torch.zeros(16, dtype=torch.long))
+        return out, model.loss_dict(out, batch, 300)["focal_mask"]
+
+    (both, loss_both), (_, loss_logits), (_, loss_probs) = run("both"), run("logits"), run("probabilities")
+    assert "probs" not in both and len(both["level_probs"]) == len(both["level_logits"])
+    assert loss_both.item() == pytest.approx(loss_logits.item() + loss_probs.item(), rel=1e-5)
+
+
 @pytest.mark.parametrize("method", ["mk-planes", "mk-planes-star", "conerf", "k-planes"])
 def test_method_trains_and_renders(method, tiny_dataset, tiny_config, tmp_path):
     out = tmp_path / method

@@ -41,9 +41,9 @@ def test_livescene_alone_reads_no_state_in_its_probability_field_at_cpu_demo():
         assert load_config("cpu-demo", method=method).model.probability.state_input == "all"
 
 
-def test_livescene_alone_trains_its_mask_loss_on_rendered_probabilities_at_cpu_demo():
+def test_livescene_alone_adds_the_rendered_probabilities_to_its_mask_loss_at_cpu_demo():
     """LiveScene's cpu-demo overlay (docs/model.md, "The mask loss on rendered probabilities")."""
-    assert load_config("cpu-demo", method="livescene").model.losses.focal_mask_on == "probabilities"
+    assert load_config("cpu-demo", method="livescene").model.losses.focal_mask_on == "both"
     assert load_config("gpu-paper", method="livescene").model.losses.focal_mask_on == "logits"  # the reference
     for method in ("mk-planes", "conerf"):
         assert load_config("cpu-demo", method=method).model.losses.focal_mask_on == "logits"

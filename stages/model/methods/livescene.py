@@ -215,7 +215,7 @@ class LiveSceneModel(nn.Module):
             out["accumulation"] = render_accumulation(w)
         if "logits" in outputs:
             out["logits"] = render_features(w.detach(), final["logits"])
-            if self.config.losses.focal_mask_on != "logits":
+            if self.config.losses.focal_mask_on in ("probabilities", "samples"):
                 # what the mask loss trains is what the relevancy maps show (weights x per-sample softmax)
                 out["probs"] = render_features(w.detach(), torch.softmax(final["logits"].float(), -1))
         if "language" in outputs and self.language_table is not None:
@@ -230,9 +230,9 @@ class LiveSceneModel(nn.Module):
             if self.config.losses.focal_mask_on == "samples":
                 out["level_samples"] = [(lv["weights"], lv["logits"]) for _, lv in [*levels, (samples, final)]
                                         if "logits" in lv]
-            elif self.config.losses.focal_mask_on == "probabilities":
+            elif self.config.losses.focal_mask_on in ("probabilities", "both"):
                 out["level_probs"] = [render_features(lv["weights"].detach(), torch.softmax(lv["logits"].float(), -1))
-                                      for _, lv in levels if "logits" in lv] + [out["probs"]]
+                                      for _, lv in [*levels, (samples, final)] if "logits" in lv]
         return out
 
     # -- losses ---------------------------------------------------------------------------------------------
@@ -241,9 +241,13 @@ class LiveSceneModel(nn.Module):
         """The focal mask loss summed over every level whose logits exist, in the form ``focal_mask_on`` names."""
         if "level_samples" in out:
             return sum(L.focal_mask_loss_samples(w, lg, labels) for w, lg in out["level_samples"])
+        def logits_form() -> torch.Tensor:
+            return sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
+
         if "level_probs" in out:
-            return sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
-        return sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
+            probs_form = sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
+            return probs_form if "probs" in out else probs_form + logits_form()  # "both": relevancy from logits
+        return logits_form()
 
     def loss_dict(self, out: dict, batch: RayBatch, step: int,
                   language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:
