@@ -137,7 +137,13 @@ def focal_mask_loss(rendered_logits: torch.Tensor, labels: torch.Tensor, gamma: 
     """``0.5 * (1 - exp(-CE))^gamma * CE`` of rendered logits [R, C] vs labels [R] (-1 = no label, skipped)."""
     valid = labels >= 0
     ce = F.cross_entropy(rendered_logits.float(), labels.clamp(min=0), reduction="none")
-    return _masked_mean(0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce, valid)
+    return _masked_mean(_focal(ce, gamma), valid)
+
+
+def _focal(ce: torch.Tensor, gamma: float, p_label: torch.Tensor | None = None) -> torch.Tensor:
+    """``0.5 * (1 - p)^gamma * CE`` with ``p = exp(-CE)`` unless the label's probability is given."""
+    p = torch.exp(-ce) if p_label is None else p_label
+    return 0.5 * (1.0 - p) ** gamma * ce
 
 
 def focal_mask_loss_probs(rendered_probs: torch.Tensor, labels: torch.Tensor, gamma: float = 1.5) -> torch.Tensor:
@@ -151,7 +157,7 @@ def focal_mask_loss_probs(rendered_probs: torch.Tensor, labels: torch.Tensor, ga
     p = p / p.sum(dim=-1, keepdim=True).clamp(min=1e-6)
     p_label = p.gather(1, labels.clamp(min=0)[:, None])[:, 0].clamp(min=1e-6)
     ce = -torch.log(p_label)
-    return _masked_mean(0.5 * (1.0 - p_label) ** gamma * ce, valid)
+    return _masked_mean(_focal(ce, gamma, p_label), valid)
 
 
 def focal_mask_loss_samples(weights: torch.Tensor, logits: torch.Tensor, labels: torch.Tensor,
@@ -166,7 +172,7 @@ def focal_mask_loss_samples(weights: torch.Tensor, logits: torch.Tensor, labels:
     n_rays, n_samples, n_classes = logits.shape
     target = labels.clamp(min=0)[:, None].expand(n_rays, n_samples).reshape(-1)
     ce = F.cross_entropy(logits.reshape(-1, n_classes).float(), target, reduction="none")
-    focal = (0.5 * (1.0 - torch.exp(-ce)) ** gamma * ce).view(n_rays, n_samples)
+    focal = _focal(ce, gamma).view(n_rays, n_samples)
     w = weights.detach().float()
     per_ray = (w * focal).sum(-1) / w.sum(-1).clamp(min=1e-6)
     return _masked_mean(per_ray, valid)

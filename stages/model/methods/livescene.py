@@ -232,22 +232,23 @@ class LiveSceneModel(nn.Module):
                                         if "logits" in lv]
             elif self.config.losses.focal_mask_on in ("probabilities", "both"):
                 out["level_probs"] = [render_features(lv["weights"].detach(), torch.softmax(lv["logits"].float(), -1))
-                                      for _, lv in [*levels, (samples, final)] if "logits" in lv]
+                                      for _, lv in levels if "logits" in lv]
+                out["level_probs"].append(out["probs"] if "probs" in out else render_features(
+                    w.detach(), torch.softmax(final["logits"].float(), -1)))
         return out
 
     # -- losses ---------------------------------------------------------------------------------------------
-    @staticmethod
-    def _focal_mask(out: dict, labels: torch.Tensor) -> torch.Tensor:
+    def _focal_mask(self, out: dict, labels: torch.Tensor) -> torch.Tensor:
         """The focal mask loss summed over every level whose logits exist, in the form ``focal_mask_on`` names."""
-        if "level_samples" in out:
+        form = self.config.losses.focal_mask_on
+        if form == "samples":
             return sum(L.focal_mask_loss_samples(w, lg, labels) for w, lg in out["level_samples"])
-        def logits_form() -> torch.Tensor:
+        if form == "logits":
             return sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
-
-        if "level_probs" in out:
-            probs_form = sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
-            return probs_form if "probs" in out else probs_form + logits_form()  # "both": relevancy from logits
-        return logits_form()
+        probs_form = sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
+        if form == "probabilities":
+            return probs_form
+        return probs_form + sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])  # both
 
     def loss_dict(self, out: dict, batch: RayBatch, step: int,
                   language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:
