@@ -12,14 +12,18 @@ import this_checkout  # noqa: F401  (this checkout's stages, here and in subproc
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def cached_demo_dataset(work: Path, capture: Path | None = None) -> tuple[Path, Path]:
-    """(capture folder, truth dataset folder) under ``work``; ``capture`` reuses an existing capture."""
+DEMO_SPEC = ROOT / "config" / "captures" / "demo.yaml"
+
+
+def cached_demo_dataset(work: Path, capture: Path | None = None, spec: Path = DEMO_SPEC) -> tuple[Path, Path]:
+    """(capture folder, truth dataset folder) under ``work``; ``capture`` reuses an existing capture, else
+    ``spec`` (the demo's by default) is rendered once into ``work``."""
     from stages.capture import capture_to_dataset, generate_capture, load_spec
 
     if capture is None:
         capture = work / "capture"
         if not (capture / "truth" / "transforms.json").is_file():
-            generate_capture(load_spec(ROOT / "config" / "captures" / "demo.yaml"), capture)
+            generate_capture(load_spec(spec), capture)
     ds_dir = work / "dataset"
     if not (ds_dir / "transforms.json").is_file():
         capture_to_dataset(capture, ds_dir, split="alternate")

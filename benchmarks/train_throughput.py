@@ -1,6 +1,7 @@
-"""Training throughput of every method on the demo capture, with and without the language table (issue 16).
+"""Training throughput of every method on the demo capture (or ``--capture``), with and without the language table
+(issue 16).
 
-For each method and language setting, a fresh subprocess builds the shared ``Trainer`` on the demo
+For each method and language setting, a fresh subprocess builds the shared ``Trainer`` on the capture's truth
 dataset (generated once into ``--work``) and runs real training steps (ray batch, every level, every
 loss term, backward, finite checks, Adam). It prints one JSON line per configuration and a table:
 
@@ -22,6 +23,10 @@ one step of each in turn; the ratio is taken per round)::
 
     .venv/bin/python benchmarks/train_throughput.py --paired --steps 100
 
+More objects (MK-Planes' planes grow as C(3 + alpha, 2), LiveScene's stay at 6)::
+
+    .venv/bin/python benchmarks/train_throughput.py --paired --capture config/captures/kitchen.yaml
+
 CUDA, paper settings::
 
     .venv/bin/python benchmarks/train_throughput.py --preset gpu-paper --device cuda --rays 4096
@@ -40,7 +45,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from demo_dataset import ROOT, cached_demo_dataset
+from demo_dataset import DEMO_SPEC, ROOT, cached_demo_dataset
 
 METHODS = ["livescene", "mk-planes", "conerf"]
 
@@ -204,7 +209,11 @@ def main() -> int:
                         "proposal fields get gradients every 5th step)")
     p.add_argument("--language", choices=["both", "on", "off"], default="both")
     p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
-    p.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "livescene-bench-demo")
+    p.add_argument("--capture", type=Path, default=DEMO_SPEC,
+                   help="capture spec to train on (default: the demo's); e.g. config/captures/kitchen.yaml for four "
+                        "objects, where MK-Planes has 21 planes per scale")
+    p.add_argument("--work", type=Path, default=None,
+                   help="where the capture and its dataset are cached (default: a temp folder named after the spec)")
     p.add_argument("--paired", action="store_true",
                    help="one process, one step of each configuration in turn (step time ratios that the machine's "
                         "drift does not move; no ops, syncs or peak memory columns)")
@@ -218,8 +227,10 @@ def main() -> int:
         args.language = args.with_language
         print(json.dumps(measure_one(args)), flush=True)
         return 0
+    if args.work is None:
+        args.work = Path(tempfile.gettempdir()) / f"livescene-bench-{args.capture.stem}"
     args.work.mkdir(parents=True, exist_ok=True)
-    _, dataset = cached_demo_dataset(args.work)
+    _, dataset = cached_demo_dataset(args.work, spec=args.capture)
     targets = language_targets(args.work, dataset)
     if args.paired:
         return measure_paired(args, dataset, targets)
