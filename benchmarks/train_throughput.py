@@ -173,8 +173,8 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
     load1 = os.getloadavg()[0]
     for f in folders:
         f.cleanup()
-    print(f"\npaired: {args.device}, {torch.get_num_threads()} threads, preset {args.preset}, {args.steps} rounds "
-          f"of one step per configuration, load {load0:.2f}-{load1:.2f}\n")
+    print(f"\npaired: capture {args.capture.stem}, {args.device}, {torch.get_num_threads()} threads, preset "
+          f"{args.preset}, {args.steps} rounds of one step per configuration, load {load0:.2f}-{load1:.2f}\n")
     print("| method | language | step ms (median) | rays/s |")
     print("|---|---|---|---|")
     rays = next(iter(trainers.values())).config.train.batch_rays
@@ -255,7 +255,8 @@ def main() -> int:
             rows[(method, lang)] = row
     rows = list(rows.values())
     head = rows[0]
-    print(f"\n{head['device']}, {head['threads']} threads, {head['rays']} rays per step, preset {args.preset}\n")
+    print(f"\ncapture {args.capture.stem}, {head['device']}, {head['threads']} threads, {head['rays']} rays per step, "
+          f"preset {args.preset}\n")
     print("| method | language | step ms | rays/s | ops/step | host syncs/step | peak MiB | load |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
