@@ -54,6 +54,11 @@ class SceneInfo:
         return len(self.objects)
 
 
+def _render_probs(weights: torch.Tensor, logits: torch.Tensor) -> torch.Tensor:
+    """Weights (detached) times every sample's softmax, summed along the ray [R, alpha + 1]."""
+    return render_features(weights.detach(), torch.softmax(logits.float(), -1))
+
+
 class LiveSceneModel(nn.Module):
     """The LiveScene method; ``forward`` renders rays, ``loss_dict`` weighs every term of section 5."""
 
@@ -216,8 +221,8 @@ class LiveSceneModel(nn.Module):
         if "logits" in outputs:
             out["logits"] = render_features(w.detach(), final["logits"])
             if self.config.losses.focal_mask_on in ("probabilities", "samples"):
-                # what the mask loss trains is what the relevancy maps show (weights x per-sample softmax)
-                out["probs"] = render_features(w.detach(), torch.softmax(final["logits"].float(), -1))
+                # what the mask loss trains is what the relevancy maps show
+                out["probs"] = _render_probs(w, final["logits"])
         if "language" in outputs and self.language_table is not None:
             out["language"] = self.render_language(w, final["logits"], states, rays.times)
         if training:
@@ -231,10 +236,8 @@ class LiveSceneModel(nn.Module):
                 out["level_samples"] = [(lv["weights"], lv["logits"]) for _, lv in [*levels, (samples, final)]
                                         if "logits" in lv]
             elif self.config.losses.focal_mask_on in ("probabilities", "both"):
-                out["level_probs"] = [render_features(lv["weights"].detach(), torch.softmax(lv["logits"].float(), -1))
-                                      for _, lv in levels if "logits" in lv]
-                out["level_probs"].append(out["probs"] if "probs" in out else render_features(
-                    w.detach(), torch.softmax(final["logits"].float(), -1)))
+                out["level_probs"] = [_render_probs(lv["weights"], lv["logits"]) for _, lv in levels if "logits" in lv]
+                out["level_probs"].append(out["probs"] if "probs" in out else _render_probs(w, final["logits"]))
         return out
 
     # -- losses ---------------------------------------------------------------------------------------------
@@ -243,12 +246,12 @@ class LiveSceneModel(nn.Module):
         form = self.config.losses.focal_mask_on
         if form == "samples":
             return sum(L.focal_mask_loss_samples(w, lg, labels) for w, lg in out["level_samples"])
-        if form == "logits":
-            return sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
-        probs_form = sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
-        if form == "probabilities":
-            return probs_form
-        return probs_form + sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])  # both
+        loss = 0.0
+        if form in ("logits", "both"):
+            loss = loss + sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
+        if form in ("probabilities", "both"):
+            loss = loss + sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
+        return loss
 
     def loss_dict(self, out: dict, batch: RayBatch, step: int,
                   language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:
