@@ -246,12 +246,12 @@ class LiveSceneModel(nn.Module):
         form = self.config.losses.focal_mask_on
         if form == "samples":
             return sum(L.focal_mask_loss_samples(w, lg, labels) for w, lg in out["level_samples"])
-        loss = 0.0
+        terms = []
         if form in ("logits", "both"):
-            loss = loss + sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"])
+            terms.append(sum(L.focal_mask_loss(lg, labels) for lg in out["level_logits"]))
         if form in ("probabilities", "both"):
-            loss = loss + sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"])
-        return loss
+            terms.append(sum(L.focal_mask_loss_probs(p, labels) for p in out["level_probs"]))
+        return sum(terms[1:], terms[0])  # no add of a leading 0: one form costs no extra op
 
     def loss_dict(self, out: dict, batch: RayBatch, step: int,
                   language: LanguageTargets | None = None) -> dict[str, torch.Tensor]:
