@@ -45,6 +45,8 @@ from stages.scene.transforms import camera_from_dict, load_json, parse_pose
 from stages.states import read_states_csv
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
+POINTS_NAME = "points3D.ply"
+"""The point cloud's name in a scene dataset (that of COLMAP's export and of the poses stage)."""
 
 
 class AssembleError(SceneError):
@@ -89,8 +91,8 @@ class PosedFrame:
     source_index: int | None
 
 
-def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict[str, Any]]:
-    """(transforms.json path, shared camera, registered frames, scene.json content or {})."""
+def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict[str, Any], Path | None]:
+    """(transforms.json path, shared camera, registered frames, scene.json content or {}, point cloud or None)."""
     tpath = poses / "transforms.json" if poses.is_dir() else poses
     data = load_json(tpath)
     raw = data.get("frames")
@@ -113,7 +115,11 @@ def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict
                                  None if src is None else int(src)))
     spath = tpath.with_name("scene.json")
     scene = load_json(spath) if spath.is_file() else {}
-    return tpath, shared, frames, scene
+    ply = data.get("ply_file_path")
+    points = None if ply is None else tpath.parent / str(ply)
+    if points is not None and not points.is_file():
+        raise AssembleError(tpath, f"ply_file_path {ply!r} names no file", "re-run `livescene poses`, or drop the key")
+    return tpath, shared, frames, scene, points
 
 
 def list_images(frames_dir: Path) -> tuple[Path, dict[str, str], dict[str, int]]:
@@ -167,7 +173,7 @@ def place_image(src: Path, dst: Path, copy: bool) -> None:
 
 def assemble_scene(config: AssembleConfig) -> SceneDataset:
     """Join the stage outputs, write the dataset atomically, validate it (deep) and return it."""
-    tpath, shared, posed, scene_json = read_poses(config.poses)
+    tpath, shared, posed, scene_json, points = read_poses(config.poses)
     image_dir, image_by_id, src_of_name = list_images(config.frames)
     registered = {frame_id_of(Path(p.name).stem): p for p in posed}
     use = [(fid, registered[fid]) for fid in image_by_id if fid in registered]
@@ -272,6 +278,9 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
                           key_frames={f: v for f, v in key_frames.items() if f in used_ids},
                           scene_box=None if box is None else np.asarray(box, dtype=np.float64),
                           prompts=prompts, meta=meta)
+        if points is not None:  # the poses' point cloud travels with the dataset (nerfstudio, `dataset orient`)
+            place_image(points, tmp / POINTS_NAME, config.copy_images)
+            ds.nerfstudio["ply_file_path"] = POINTS_NAME
         write_scene(ds, tmp)
         read_scene(tmp, validate=True, deep=True)
     return read_scene(config.out, validate=False)

@@ -154,3 +154,21 @@ def test_old_scene_assemble_name_runs_the_dataset_stage(tmp_path, capsys):
     assert read_scene(out).objects == NAMES
     assert scene_main(["assemble", "--frames", str(paths["frames"])]) == 2
     assert "run `livescene dataset assemble`" in capsys.readouterr().err
+
+
+def test_the_poses_point_cloud_travels_with_the_dataset(tmp_path):
+    paths = make_stage_outputs(tmp_path)
+    ply = ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+           "end_header\n0 0 0\n")
+    (paths["poses"] / "points3D.ply").write_text(ply)
+    data = json.loads((paths["poses"] / "transforms.json").read_text())
+    (paths["poses"] / "transforms.json").write_text(json.dumps({**data, "ply_file_path": "points3D.ply"}))
+    ds = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds",
+                                       progress=False))
+    assert ds.nerfstudio["ply_file_path"] == "points3D.ply"
+    assert (tmp_path / "ds" / "points3D.ply").read_text() == ply
+    (paths["poses"] / "points3D.ply").unlink()
+    with pytest.raises(SceneError, match=r"ply_file_path 'points3D\.ply' names no file"):
+        assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds2",
+                                      progress=False))
+    assert not (tmp_path / "ds2").exists()
