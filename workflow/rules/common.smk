@@ -194,3 +194,13 @@ def report_manifest(wildcards, input):
     manifest["benchmarks"] = R(scene, "benchmarks")
     manifest["logs"] = R(scene, "logs")
     return json.dumps(manifest)
+
+
+def export_args(wildcards):
+    c = config["export"]
+    args = [f"--states {shlex.quote(s)}" for s in c["states"]]
+    args += [f"--format {c['format']}", f"--views {c['views']}", f"--scale {c['scale']}"]
+    # object parts come from the rendered object probabilities, which the mask losses train
+    if carries(wildcards.scene, "masks"):
+        args.append("--objects")
+    return " ".join(args)

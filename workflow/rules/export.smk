@@ -2,16 +2,6 @@
 # part alone when the scene has masks; the report shows sizes, timings and a thumbnail per state.
 
 
-def export_args(wildcards):
-    c = config["export"]
-    args = [f"--states {shlex.quote(s)}" for s in c["states"]]
-    args += [f"--format {c['format']}", f"--views {c['views']}", f"--scale {c['scale']}"]
-    # object parts come from the rendered object probabilities, which the mask losses train
-    if carries(wildcards.scene, "masks"):
-        args.append("--objects")
-    return " ".join(args)
-
-
 rule export:
     input:
         unpack(dataset_input),
