@@ -2,6 +2,10 @@
 
     livescene dataset assemble --frames FRAMES --poses POSES|transforms.json [--labels LABELS]
                                [--states STATES] [--prompts prompts.yaml] --out DS
+    livescene dataset orient --data READY_DS [--points PLY] --out DS
+
+``orient`` writes a copy of a ready dataset (poses that came with the data) in the upright, wall-aligned
+world of the poses stage, or unchanged with the reason (docs/poses.md, "World frame").
 
 ``livescene scene validate DS`` / ``info DS`` check and summarise the result (docs/data-contract.md).
 """
@@ -33,6 +37,11 @@ def build_parser(prog: str = "livescene dataset") -> argparse.ArgumentParser:
     a.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
     a.add_argument("--out", required=True, type=Path, help="scene dataset folder to write")
     a.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    o = sub.add_parser("orient", help="copy a ready dataset into the upright, wall-aligned world")
+    o.add_argument("--data", required=True, type=Path, help="scene dataset whose poses came with the data (only read)")
+    o.add_argument("--points", type=Path, default=None,
+                   help="point cloud in the poses' world (default: the dataset's ply_file_path)")
+    o.add_argument("--out", required=True, type=Path, help="folder of the oriented copy")
     return parser
 
 
@@ -49,6 +58,16 @@ def assemble(args: argparse.Namespace) -> int:
     return 0
 
 
+@cli_errors(ValueError)
+def orient(args: argparse.Namespace) -> int:
+    from .orient import orient_dataset  # imported on use: it loads open3d and pycolmap
+
+    ds, how = orient_dataset(args.data, args.out, args.points)
+    verb = "turned upright" if how.turned else "world kept"
+    print(f"{args.out}: {len(ds.frames)} frames, {verb}: {how.reason}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return assemble(args)
+    return {"assemble": assemble, "orient": orient}[args.command](args)

@@ -73,7 +73,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     truth = None
     if args.truth:
         same_world = str(ds.meta.get("units", "")).lower() != "colmap"
-        truth = TruthSource.from_capture(args.truth, args.pose_alignment, same_world=same_world)
+        truth = TruthSource.from_capture(args.truth, args.pose_alignment, same_world=same_world).after_turn(ds.meta)
     grounder = None
     if not args.no_grounding:
         from stages.language.cli import encoder_from_args

@@ -20,6 +20,7 @@ residual of the alignment is reported, so a reader can judge it.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -88,6 +89,16 @@ class TruthSource:
         return cls(renderer=TruthRenderer.from_capture(capture_dir), camera=camera, object_ids=object_ids,
                    poses=poses, states=states, sim3=sim3, same_world=same_world and sim3 is None,
                    origin=str(capture_dir))
+
+    def after_turn(self, meta: Mapping[str, Any]) -> TruthSource:
+        """This source for a dataset whose scene.json ``meta`` may record a turn by ``livescene dataset orient``.
+
+        A turned copy of a dataset in the truth's own world is no longer in it: the turn (``new_from_old``)
+        maps truth to dataset poses, so it serves as the pose alignment (docs/poses.md, "Ready datasets")."""
+        turned = meta.get("orientation") or {}
+        if not (turned.get("turned") and self.same_world):
+            return self
+        return dataclasses.replace(self, sim3=np.asarray(turned["new_from_old"], dtype=np.float64), same_world=False)
 
     def camera_for(self, width: int, height: int) -> Camera:
         """The truth camera at the dataset's image size (the dataset may use downscaled images)."""

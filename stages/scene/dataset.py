@@ -44,7 +44,8 @@ from .yaml_io import read_yaml_mapping
 
 NERFSTUDIO_KEYS = ("applied_transform", "applied_scale", "ply_file_path", "orientation_override")
 """Top-level transforms.json keys of nerfstudio that this project does not interpret but keeps on a
-read-write round trip (they describe the world of the poses, which no stage here changes)."""
+read-write round trip (they describe the world of the poses; ``dataset orient`` composes its turn into
+``applied_transform``)."""
 SPLIT_KEYS = {"train_filenames": "train", "val_filenames": "test", "test_filenames": "test"}
 """nerfstudio's split lists -> this project's per-frame split. nerfstudio evaluates on ``val`` while
 training and on ``test`` in ``ns-eval``, so both name the held-out frames."""
@@ -378,7 +379,7 @@ def write_scene(ds: SceneDataset, root: str | Path | None = None) -> Path:
         frames_out.append(entry)
     tdata["frames"] = frames_out
     tdata.update(split_lists(ds.frames))
-    tdata["applied_transform"] = np.eye(4)[:3].tolist()  # the world of the poses, unchanged
+    tdata["applied_transform"] = np.eye(4)[:3].tolist()  # unless ds.nerfstudio records one (below)
     kept = {k: v for k, v in ds.nerfstudio.items() if k in NERFSTUDIO_KEYS}
     tdata.update(json.loads(json.dumps(kept, default=_np_default)))
     write_json(root / "transforms.json", tdata)

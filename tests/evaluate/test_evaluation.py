@@ -261,3 +261,19 @@ def test_locality_passes_a_local_run_and_fails_one_that_repaints_the_room(eval_s
     leaky = evaluate_run(Repaints(ds, truth.renderer), ds, tmp_path / "leaky", truth, None, cfg)["locality"]
     assert not leaky["all_local"]
     assert leaky["objects"]["drawer"]["model_outside_x255"]["mean"] == pytest.approx(0.02 * 255, abs=0.5)
+
+
+def test_a_turned_copy_of_a_truth_world_dataset_is_aligned_by_its_turn(eval_scene):
+    ds, _, truth = eval_scene
+    turn = np.eye(4)
+    turn[:3, :3] = np.array([[0.0, -1.0, 0.0], [0.6, 0.0, -0.8], [0.8, 0.0, 0.6]])
+    turn[:3, 3] = [0.3, -1.0, 2.0]
+    meta = {"orientation": {"turned": True, "new_from_old": turn.tolist()}}
+    unnamed = Frame(file_path="images/frame_00099.png", c2w=turn @ ds.frames[2].c2w)  # no source_index
+    pose, how = truth.after_turn(meta).pose_for(unnamed)
+    assert how == "sim3"
+    np.testing.assert_allclose(pose, ds.frames[2].c2w, atol=1e-9)
+    assert truth.after_turn({"orientation": {"turned": False, "new_from_old": np.eye(4).tolist()}}) is truth
+    assert truth.after_turn({}) is truth
+    other = TruthSource(renderer=truth.renderer, camera=truth.camera, object_ids={}, same_world=False)
+    assert other.after_turn(meta) is other  # estimated poses: aligned by pose_error.json, not by the turn

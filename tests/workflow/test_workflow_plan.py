@@ -18,7 +18,7 @@ def test_default_demo_runs_every_stage(workflow_copy):
     for rule in PIPELINE | {"language_targets", "sweep", "control", "stability", "report_scene", "report_index"}:
         assert jobs.get(rule) == 1, (rule, jobs)
     assert jobs["train"] == 3 and jobs["evaluate"] == 3  # livescene, mk-planes, conerf
-    assert "capture_dataset" not in jobs and "scene_validate" not in jobs
+    assert "capture_dataset" not in jobs and "scene_validate" not in jobs and "dataset_orient" not in jobs
 
 
 @pytest.fixture(scope="module")
@@ -53,6 +53,9 @@ def test_ready_dataset_with_poses_skips_frames_and_poses(mixed_plan):
     jobs = mixed_plan.scene_jobs("ready")
     assert not PIPELINE & set(jobs), sorted(jobs)
     assert len(jobs["scene_validate"]) == 1 and len(jobs["language_targets"]) == 1
+    # the ready dataset is copied into the upright world, and every model rule reads the copy
+    assert len(jobs["dataset_orient"]) == 1 and "dataset orient --data" in jobs["dataset_orient"][0]
+    assert all("results/ready/dataset" in t for t in jobs["train"])
     assert len(jobs["train"]) == 2 and len(jobs["evaluate"]) == 2
     assert not any("--truth" in text for text in jobs["evaluate"])  # no truth: no truth-based evaluation
     assert any("--method k-planes" in t for t in jobs["train"])
@@ -75,7 +78,7 @@ def test_scene_without_names_skips_language(mixed_plan):
 def test_synthetic_with_given_poses_uses_the_truth_dataset(mixed_plan):
     jobs = mixed_plan.scene_jobs("given")
     assert {"capture", "capture_dataset", "language_targets", "train", "evaluate"} <= set(jobs)
-    assert not {"frames", "poses", "pose_compare", "labels", "states", "assemble"} & set(jobs)
+    assert not {"frames", "poses", "pose_compare", "labels", "states", "assemble", "dataset_orient"} & set(jobs)
     assert all("--truth" in t and "--pose-alignment" not in t for t in jobs["evaluate"])
 
 
@@ -176,3 +179,20 @@ def test_only_builds_the_named_scenes(workflow_copy):
     assert len(index) == 1 and "--pending a" in index[0]
     bad = workflow_copy.snakemake("-n", "--cores", "1", "--config", "only=c")
     assert bad.code != 0 and "config key 'only': scene(s) ['c'] are not in the scene sheet" in bad.output
+
+
+def test_poses_orient_false_keeps_every_world(workflow_copy, tmp_path):
+    ready = tmp_path / "ready"
+    ready.mkdir()  # a dry run only needs the folder to exist
+    workflow_copy.write_scenes([
+        {"scene": "demo", "source": "synthetic", "path": "config/captures/demo.yaml"},
+        {"scene": "ready", "source": "dataset", "path": ready, "poses": "given", "names": "no",
+         "methods": "livescene"}])
+    default = workflow_copy.dry_run()
+    assert "--no-orient" not in default.scene_jobs("demo")["poses"][0]
+    assert "dataset_orient" in default.scene_jobs("ready")
+    keep = workflow_copy.write_config(poses={"orient": False})
+    plan = workflow_copy.dry_run("--configfile", str(keep))
+    assert "--no-orient" in plan.scene_jobs("demo")["poses"][0]
+    jobs = plan.scene_jobs("ready")
+    assert "dataset_orient" not in jobs and all(str(ready) in t for t in jobs["train"])

@@ -61,9 +61,16 @@ def truth_dir(scene):
     return capture_dir(scene) if value == "yes" else value
 
 
+def orients_ready_dataset(scene):
+    """True when a ready dataset is copied into the upright world (rule dataset_orient) before training."""
+    return source(scene) == "dataset" and config["poses"]["orient"]
+
+
 def dataset_dir(scene):
     """The scene dataset every model rule reads."""
     kind = source(scene)
+    if orients_ready_dataset(scene):
+        return R(scene, "dataset")
     if kind == "dataset":
         return row(scene)["path"]
     if kind == "synthetic" and not from_frames(scene):
@@ -120,6 +127,10 @@ def plan(scene):
     p["states"] = (states, "key frames given" if states else given if not framed else "scene has no key frames")
     p["assemble"] = (framed, "joins frames, poses, labels, states" if framed
                      else "dataset comes ready" if kind == "dataset" else "dataset written from the capture truth")
+    p["dataset_orient"] = (orients_ready_dataset(scene),
+                           "ready dataset turned upright (if its points show a floor)" if orients_ready_dataset(scene)
+                           else "poses.orient is false" if kind == "dataset"
+                           else "the poses stage orients the world" if framed else "truth poses are upright")
     p["scene_validate"] = (kind == "dataset", "ready dataset checked against the contract" if kind == "dataset"
                            else "dataset written by this workflow (validated when written)")
     p["language_targets"] = (has_names(scene), "object names given" if has_names(scene) else "scene has no names")

@@ -1,6 +1,8 @@
 # Poses: COLMAP structure from motion on the frames, interactive objects masked out; and, when the
 # scene has truth, the error of the estimated poses against it.
 
+NO_ORIENT = "" if config["poses"]["orient"] else " --no-orient"  # in the command only when set: unchanged jobs
+
 
 rule poses:
     wildcard_constraints:
@@ -27,8 +29,8 @@ rule poses:
         ENV
     shell:
         "{params.cli} poses --frames {input.frames} --out {output} {params.masks} --threads {threads}"
-        " --seed {params.seed} --matcher {params.matcher} --max-features {params.features} --no-progress"
-        " > {log} 2>&1"
+        " --seed {params.seed} --matcher {params.matcher} --max-features {params.features}"
+        f"{NO_ORIENT} --no-progress > {{log}} 2>&1"
 
 
 rule poses_import:
@@ -52,7 +54,8 @@ rule poses_import:
     conda:
         ENV
     shell:
-        "{params.cli} poses import --model {input.model} --frames {input.frames} --out {output} > {log} 2>&1"
+        "{params.cli} poses import --model {input.model} --frames {input.frames} --out {output}"
+        f"{NO_ORIENT} > {{log}} 2>&1"
 
 
 rule pose_compare:

@@ -1,8 +1,11 @@
 # Scene dataset: assemble frames, poses, labels and states into the dataset contract (the dataset
-# stage, `livescene dataset assemble`), or check a ready dataset against it (`livescene scene`).
+# stage, `livescene dataset assemble`), or check a ready dataset against it (`livescene scene`) and copy it
+# into the upright world (`livescene dataset orient`).
 
 
 rule assemble:
+    wildcard_constraints:
+        scene=scene_pattern(from_frames),  # dataset_orient writes the same folder for ready datasets
     input:
         unpack(assemble_input),
     output:
@@ -44,3 +47,27 @@ rule scene_validate:
         ENV
     shell:
         "({params.cli} scene validate {input} && {params.cli} scene info {input} > {output}) > {log} 2>&1"
+
+
+rule dataset_orient:
+    wildcard_constraints:
+        scene=scene_pattern(orients_ready_dataset),
+    input:
+        data=lambda w: row(w.scene)["path"],
+        valid=R("{scene}", "dataset_valid.json"),
+    output:
+        directory(R("{scene}", "dataset")),
+    log:
+        log_path("dataset_orient"),
+    benchmark:
+        bench_path("dataset_orient")
+    params:
+        cli=LIVESCENE,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENV
+    shell:
+        "{params.cli} dataset orient --data {input.data} --out {output} > {log} 2>&1"
