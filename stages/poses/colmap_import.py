@@ -27,8 +27,15 @@ from stages.scene import InputError, atomic_dir, frame_id_of, write_json
 from .colmap_files import binary_file_problem, text_file_problem
 from .errors import PoseQualityError
 from .frame_list import IMAGE_SUFFIXES, read_frame_list
-from .model_export import SUPPORTED_CAMERA_MODELS, relative_file_path, transforms_dict, write_model_outputs
-from .quality_gate import compact_names, intrinsics_warnings
+from .model_export import (
+    SUPPORTED_CAMERA_MODELS,
+    drop_frames,
+    relative_file_path,
+    transforms_dict,
+    write_model_outputs,
+)
+from .quality_gate import check_trajectory, compact_names, intrinsics_warnings
+from .trajectory_check import TrajectoryJudgement, TrajectorySettings, judge_trajectory, median_point_depth
 from .world_frame import orient_reconstruction
 
 STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
@@ -60,6 +67,8 @@ class ImportConfig:
     orient: bool = True
     """Turn the model's world to z up and x, y along the walls (world_frame.py), as ``livescene poses`` does;
     False keeps the model's own frame."""
+    trajectory: TrajectorySettings = field(default_factory=TrajectorySettings)
+    """The camera-path gate of ``livescene poses`` (trajectory_check.py), applied to the imported cameras."""
 
 
 @dataclass
@@ -273,6 +282,25 @@ def match_images(rec: pycolmap.Reconstruction, image_dir: Path) -> Matched:
     return Matched({n: n for n in posed}, names, {n: _frame_number(n) for n in names}, image_dir, [])
 
 
+IMPORT_BROKEN_FIX = ("COLMAP's model holds cameras that no continuous path joins; remake it from the frames "
+                     "(`livescene poses` runs structure from motion itself) or with more overlap between neighbouring "
+                     "images")
+
+
+def judge_imported_path(rec: pycolmap.Reconstruction, registered: list[str], source_index: dict[str, int | None],
+                        n_frames: int, n_posed: int, settings: TrajectorySettings) -> TrajectoryJudgement:
+    """The trajectory gate's numbers for the imported cameras, in playback order (source index, else name)."""
+    if all(source_index.get(n) is not None for n in registered):
+        order = sorted(registered, key=lambda n: (source_index[n], n))
+        times = np.array([float(source_index[n]) for n in order])  # type: ignore[arg-type]
+    else:
+        order = sorted(registered)
+        times = np.arange(len(order), dtype=np.float64)
+    centres = np.array([rec.find_image_with_name(n).projection_center() for n in order]).reshape(-1, 3)
+    points = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
+    return judge_trajectory(order, centres, times, median_point_depth(centres, points), n_frames, [n_posed], settings)
+
+
 def _frames_source_kind(frames_dir: Path) -> str | None:
     """``source_kind`` of frames.json (video or images), when the folder has one."""
     try:
@@ -319,19 +347,25 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
         mapping, names, source_index, image_dir, extra = (matched.mapping, matched.names, matched.source_index,
                                                           matched.image_dir, matched.extra)
         registered = sorted(set(mapping.values()))
-        unregistered = [n for n in names if n not in set(registered)]
-        fraction = len(registered) / len(names) if names else 0.0
         required = max(cfg.min_registered, 2 / max(len(names), 1))  # a model needs two posed views
-        if fraction < required:
-            model_names = compact_names(posed)
-            raise PoseQualityError(origin, f"only {len(registered)} of {len(names)} {kind} ({fraction:.0%}) have a "
-                                   f"posed image in the COLMAP model {located.folder}, below the required "
-                                   f"{required:.0%}; {kind} without one: {compact_names(unregistered)}; posed model "
-                                   f"images: {model_names} (matched by the number in the name: 0001.jpg = "
-                                   "frame_00001.png)",
-                                   "import the model made from the images these frames were extracted from, extract "
-                                   "the frames from the folder the model was made from (`livescene frames --video "
-                                   "FOLDER`), or lower --min-registered if a partial model is acceptable")
+
+        def check_fraction(registered: list[str], trimmed: list[str]) -> float:
+            fraction = len(registered) / len(names) if names else 0.0
+            if fraction < required:
+                unregistered = [n for n in names if n not in set(registered)]
+                dropped = f" ({len(trimmed)} dropped as jumps: {compact_names(trimmed)})" if trimmed else ""
+                raise PoseQualityError(origin, f"only {len(registered)} of {len(names)} {kind} ({fraction:.0%}) have "
+                                       f"a posed image in the COLMAP model {located.folder}{dropped}, below the "
+                                       f"required {required:.0%}; {kind} without one: {compact_names(unregistered)}; "
+                                       f"posed model images: {compact_names(posed)} (matched by the number in the "
+                                       "name: 0001.jpg = frame_00001.png)",
+                                       "import the model made from the images these frames were extracted from, "
+                                       "extract the frames from the folder the model was made from (`livescene "
+                                       "frames --video FOLDER`), or lower --min-registered if a partial model is "
+                                       "acceptable")
+            return fraction
+
+        check_fraction(registered, [])
         if extra:
             warnings_.append(f"{len(extra)} posed model image(s) match no frame and are left out: "
                              f"{compact_names(extra)}")
@@ -355,6 +389,14 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
         for cname, fname in renamed.items():  # sparse/0 then names the frames it is stored beside
             rec.find_image_with_name(cname).name = fname
         timings["match"] = time.perf_counter() - t0
+
+        # the camera path is judged as `livescene poses` judges its own: a model made elsewhere can be a tripod clip
+        judged = judge_imported_path(rec, registered, source_index, len(names), len(posed), cfg.trajectory)
+        warnings_ += check_trajectory(judged, origin, cfg.trajectory, IMPORT_BROKEN_FIX)
+        drop_frames(rec, judged.trimmed)
+        registered = [n for n in registered if n not in set(judged.trimmed)]
+        fraction = check_fraction(registered, judged.trimmed)
+        unregistered = [n for n in names if n not in set(registered) and n not in set(judged.trimmed)]
 
         t0 = time.perf_counter()
         frame = orient_reconstruction(rec) if cfg.orient else None
@@ -382,6 +424,8 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
             "registered_fraction": fraction,
             "registered": registered,
             "unregistered": unregistered,
+            "trimmed": judged.trimmed,
+            "trajectory": judged.as_dict(),
             "model_images_without_frame": extra,
             "renamed": renamed,
             "intrinsics_scale": {str(k): v for k, v in scales.items()},

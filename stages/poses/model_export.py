@@ -57,6 +57,12 @@ def registered_poses(reconstruction: pycolmap.Reconstruction) -> dict[str, np.nd
     return out
 
 
+def drop_frames(rec: pycolmap.Reconstruction, names: list[str]) -> None:
+    """Deregister the images ``names`` (trimmed by the trajectory gate): sparse/0 and transforms.json then agree."""
+    for name in names:
+        rec.deregister_frame(rec.find_image_with_name(name).frame_id)
+
+
 def relative_file_path(image: Path, out_dir: Path) -> str:
     """``file_path`` of ``image`` relative to the folder transforms.json is written to.
 

@@ -18,7 +18,7 @@ from .camera_motion import FeatureMotion, feature_motion
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
 from .frame_list import FrameList, read_frame_list
-from .model_export import registered_poses, transforms_dict, write_model_outputs
+from .model_export import drop_frames, registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
     check_motion,
@@ -56,12 +56,6 @@ def judge_model(rec: pycolmap.Reconstruction, ordered: list[str], times: dict[st
     points = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
     return judge_trajectory(order, centres, np.array([times[n] for n in order]), median_point_depth(centres, points),
                             len(ordered), sfm.model_sizes, cfg.trajectory_settings())
-
-
-def drop_frames(rec: pycolmap.Reconstruction, names: list[str]) -> None:
-    """Deregister the images ``names`` (trimmed by the gate): sparse/0 and transforms.json then agree."""
-    for name in names:
-        rec.deregister_frame(rec.find_image_with_name(name).frame_id)
 
 
 def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
@@ -123,7 +117,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
         assert rec is not None  # the gate above rejects an empty result
         judged = judge_model(rec, ordered, times, registered, sfm, cfg)
-        warnings_ += check_trajectory(judged, motion, pre, cfg, sfm.matcher)
+        warnings_ += check_trajectory(judged, cfg.frames_dir, cfg.trajectory_settings(),
+                                      registration_advice(cfg, sfm.matcher), motion, pre)
         drop_frames(rec, judged.trimmed)
         registered -= set(judged.trimmed)
         if judged.trimmed:

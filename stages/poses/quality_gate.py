@@ -12,7 +12,7 @@ from .camera_motion import FeatureMotion
 from .config import PosesConfig
 from .errors import DegenerateTrajectoryError, PoseQualityError, StaticCameraError
 from .static_check import MotionPrecheck
-from .trajectory_check import TrajectoryJudgement
+from .trajectory_check import TrajectoryJudgement, TrajectorySettings
 
 STATIC_ADVICE = (
     "move the camera through the room (walk around, do not only turn on the spot): COLMAP needs "
@@ -117,14 +117,17 @@ def check_precheck(pre: MotionPrecheck, names: list[str], frames_dir: Path) -> N
     )
 
 
-def check_trajectory(judged: TrajectoryJudgement, motion: FeatureMotion, pre: MotionPrecheck | None,
-                     cfg: PosesConfig, matcher: str) -> list[str]:
-    """Raise for an implausible camera path; return warnings (trimmed frames, a very wide path)."""
-    frames_dir = cfg.frames_dir
+def check_trajectory(judged: TrajectoryJudgement, frames_dir: Path, settings: TrajectorySettings, broken_fix: str,
+                     motion: FeatureMotion | None = None, pre: MotionPrecheck | None = None) -> list[str]:
+    """Raise for an implausible camera path; return warnings (trimmed frames, a very wide path).
+
+    ``frames_dir`` is named in the errors; ``broken_fix`` is the advice for a path in pieces (what structure
+    from motion could try, or how to remake an imported model); ``motion`` and ``pre`` are the feature tracks
+    of a run of structure from motion (an imported model has none)."""
     depth = judged.median_point_depth
     if judged.verdict == "refuse" and judged.reason in ("static", "static after trim"):
         rotation = (f"; {motion.rotation_only_fraction:.0%} of matched pairs look like a camera turning on the "
-                    "spot") if motion.rotation_only_fraction > 0 else ""
+                    "spot") if motion is not None and motion.rotation_only_fraction > 0 else ""
         which = "all reconstructed camera centres" if judged.reason == "static" else \
             f"after dropping the jumping frames {compact_names(judged.trimmed, order=judged.order)}, the other " \
             "camera centres"
@@ -145,19 +148,19 @@ def check_trajectory(judged: TrajectoryJudgement, motion: FeatureMotion, pre: Mo
         raise DegenerateTrajectoryError(
             frames_dir,
             f"the camera path breaks into {len(judged.pieces)} pieces at jumps longer than {judged.jump_limit:.3g} "
-            f"units per frame ({cfg.jump_factor:g} x the typical step {judged.typical_step:.3g}; median point depth "
-            f"{depth:.3g}) and none holds a majority of the {judged.n_registered} cameras: {pieces}",
-            "the pieces do not connect: " + registration_advice(cfg, matcher),
+            f"units per frame ({settings.jump_factor:g} x the typical step {judged.typical_step:.3g}; median point "
+            f"depth {depth:.3g}) and none holds a majority of the {judged.n_registered} cameras: {pieces}",
+            "the pieces do not connect: " + broken_fix,
         )
     out = []
     if judged.verdict == "trim":
         trimmed = compact_names(judged.trimmed, order=judged.order)
         out.append(f"dropped {len(judged.trimmed)} frame(s) whose cameras jump away from their neighbours in time "
                    f"({trimmed}): steps longer than {judged.jump_limit:.3g} units per frame "
-                   f"({cfg.jump_factor:g} x the typical step, median point depth {depth:.3g}); they get no pose")
-    if judged.spread_ratio > cfg.max_spread_ratio:
+                   f"({settings.jump_factor:g} x the typical step, median point depth {depth:.3g}); they get no pose")
+    if judged.spread_ratio > settings.max_spread_ratio:
         out.append(f"a camera lies {judged.spread_ratio:.1f} median point depths from the middle of the path "
-                   f"(limit {cfg.max_spread_ratio:g}): check the poses before training on them")
+                   f"(limit {settings.max_spread_ratio:g}): check the poses before training on them")
     return out
 
 

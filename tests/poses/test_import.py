@@ -24,9 +24,9 @@ from poses_testdata import SMALL_CAMERA
 from stages.frames import FramesConfig, extract_frames
 from stages.poses.cli import main as poses_main
 from stages.poses.colmap_import import ImportConfig, import_model
-from stages.poses.errors import PoseQualityError
+from stages.poses.errors import PoseQualityError, StaticCameraError
 from stages.poses.model_export import transforms_dict
-from stages.scene import InputError, read_scene
+from stages.scene import InputError, look_at, read_scene
 
 NUMBERS, POSES = default_scene(12)
 COLMAP_NAMES = [f"{i:04d}.jpg" for i in NUMBERS]
@@ -283,3 +283,28 @@ def test_renamed_frames_of_a_video_are_flagged(capture: tuple[Path, Path], tmp_p
     summary = import_model(ImportConfig(model_dir=_model(tmp_path), out_dir=tmp_path / "poses",
                                         frames_dir=video_frames))
     assert any("the frames come from a video" in w for w in summary["warnings"])
+
+
+def test_the_camera_path_gate_of_poses_applies_to_a_model(capture: tuple[Path, Path], tmp_path: Path) -> None:
+    """A model made elsewhere passes the trajectory gate of `livescene poses`: a tripod clip is refused, a camera
+    thrown across the room is dropped with a warning."""
+    _source, frames = capture
+    eye = POSES[0][:3, 3]
+    tripod = [look_at(eye + np.random.default_rng(k).normal(0.0, 1e-4, 3), p[:3, 3] + 2.0 * (p[:3, 3] - eye)
+                      - 2.0 * p[:3, 2]) for k, p in enumerate(POSES)]
+    with pytest.raises(StaticCameraError, match="the camera does not move") as info:
+        import_model(ImportConfig(model_dir=_model(tmp_path / "a", poses=tripod), out_dir=tmp_path / "p1",
+                                  frames_dir=frames))
+    assert str(frames) in str(info.value)
+    assert not (tmp_path / "p1").exists()
+
+    thrown = [p.copy() for p in POSES]
+    thrown[6][:3, 3] += [0.0, 0.0, 40.0]  # frame 7 lands far above the room
+    summary = import_model(ImportConfig(model_dir=_model(tmp_path / "b", poses=thrown), out_dir=tmp_path / "p2",
+                                        frames_dir=frames))
+    assert summary["trimmed"] == ["frame_00007.png"] and summary["trajectory"]["verdict"] == "trim"
+    assert "frame_00007.png" not in summary["registered"] and summary["n_registered"] == 11
+    assert any("jump away from their neighbours" in w for w in summary["warnings"])
+    ds = json.loads((tmp_path / "p2" / "transforms.json").read_text())
+    assert len(ds["frames"]) == 11 and not any("frame_00007" in f["file_path"] for f in ds["frames"])
+    assert len(pycolmap.Reconstruction(tmp_path / "p2" / "sparse" / "0").reg_image_ids()) == 11

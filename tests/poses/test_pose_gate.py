@@ -13,9 +13,9 @@ from poses_testdata import orbit_poses, write_sequence
 from stages.poses import PosesConfig, StaticCameraError, estimate_poses
 from stages.poses.camera_motion import FeatureMotion
 from stages.poses.errors import DegenerateTrajectoryError
-from stages.poses.quality_gate import check_trajectory
+from stages.poses.quality_gate import check_trajectory, registration_advice
 from stages.poses.static_check import MotionPrecheck, measure_motion
-from stages.poses.trajectory_check import judge_trajectory
+from stages.poses.trajectory_check import TrajectorySettings, judge_trajectory
 
 NO_MOTION = FeatureMotion(n_pairs=10, max_median_px=5.0, rotation_only_fraction=0.0)
 
@@ -26,6 +26,12 @@ def names(n: int) -> list[str]:
 
 def gate(tmp_path: Path) -> PosesConfig:
     return PosesConfig(frames_dir=tmp_path / "frames", out_dir=tmp_path / "out")
+
+
+def sfm_gate(tmp_path: Path, matcher: str) -> tuple[Path, TrajectorySettings, str]:
+    """The trajectory gate's arguments as the poses stage passes them after a run with ``matcher``."""
+    cfg = gate(tmp_path)
+    return cfg.frames_dir, cfg.trajectory_settings(), registration_advice(cfg, matcher)
 
 
 def arc(n: int, radius: float = 3.0, seed: int = 0) -> np.ndarray:
@@ -49,7 +55,7 @@ def test_a_tripod_clip_after_a_short_pan_is_refused_naming_the_frames(tmp_path: 
     assert judged.still_share == pytest.approx(202 / 267) and judged.still_spread < 0.02
     assert judged.moving_reach == pytest.approx(36.0, abs=0.01)
     with pytest.raises(DegenerateTrajectoryError) as info:
-        check_trajectory(judged, NO_MOTION, None, gate(tmp_path), "sequential")
+        check_trajectory(judged, *sfm_gate(tmp_path, "sequential"), NO_MOTION, None)
     message = str(info.value)
     assert "frames frame_00000..frame_00064 (65) lie up to 36 units from the other 202 cameras" in message
     assert "frame_00065..frame_00266 (202)" in message and "median point depth 4.75" in message
@@ -62,7 +68,7 @@ def test_a_tripod_clip_after_a_short_pan_is_refused_naming_the_frames(tmp_path: 
                          max_still_px=30.0, still_pair_fraction=0.76, still_frames=[], still_spans=[],
                          parallax_threshold_px=2.3, rotation_only_fraction=1.0, seconds=1.0)
     with pytest.raises(DegenerateTrajectoryError) as info:
-        check_trajectory(judged, NO_MOTION, pan, gate(tmp_path), "sequential")
+        check_trajectory(judged, *sfm_gate(tmp_path, "sequential"), NO_MOTION, pan)
     assert "the frames that move show no parallax" in str(info.value) and "cut the clip" not in str(info.value)
 
 
@@ -84,7 +90,7 @@ def test_a_camera_that_jumps_away_and_back_is_trimmed(tmp_path: Path) -> None:
     judged = judge_trajectory(names(50), centres, np.arange(50), 3.0, 50, [50])
     assert judged.verdict == "trim" and judged.jump_outliers == ["frame_00020.png"]
     assert judged.trimmed == ["frame_00020.png"] and len(judged.kept) == 49
-    (warning,) = check_trajectory(judged, NO_MOTION, None, gate(tmp_path), "sequential")
+    (warning,) = check_trajectory(judged, *sfm_gate(tmp_path, "sequential"), NO_MOTION, None)
     assert warning.startswith("dropped 1 frame(s) whose cameras jump away from their neighbours in time "
                               "(frame_00020)")
 
@@ -99,7 +105,7 @@ def test_a_broken_path_is_cut_to_its_majority_or_refused(tmp_path: Path) -> None
     judged = judge_trajectory(names(50), centres, np.arange(50), 3.0, 50, [50])
     assert judged.verdict == "refuse" and judged.piece_sizes == [25, 15, 10]
     with pytest.raises(DegenerateTrajectoryError) as info:
-        check_trajectory(judged, NO_MOTION, None, gate(tmp_path), "exhaustive")
+        check_trajectory(judged, *sfm_gate(tmp_path, "exhaustive"), NO_MOTION, None)
     message = str(info.value)
     assert "breaks into 3 pieces" in message and "frame_00025.png..frame_00039.png (15)" in message
     assert "--matcher exhaustive" not in message  # already tried
@@ -110,7 +116,7 @@ def test_a_model_without_baseline_is_static(tmp_path: Path) -> None:
     judged = judge_trajectory(names(20), centres, np.arange(20), 4.0, 20, [20])
     assert judged.verdict == "refuse" and judged.reason == "static" and judged.baseline_ratio < 0.01
     with pytest.raises(StaticCameraError, match="the camera does not move"):
-        check_trajectory(judged, NO_MOTION, None, gate(tmp_path), "sequential")
+        check_trajectory(judged, *sfm_gate(tmp_path, "sequential"), NO_MOTION, None)
 
 
 # -- before structure from motion --------------------------------------------------------------------------------
@@ -182,8 +188,8 @@ def test_trimmed_frames_leave_the_model(tmp_path: Path) -> None:
     import pycolmap
 
     from stages.poses import cam_from_world_from_c2w_opengl
-    from stages.poses.model_export import transforms_dict
-    from stages.poses.pipeline import drop_frames, judge_model
+    from stages.poses.model_export import drop_frames, transforms_dict
+    from stages.poses.pipeline import judge_model
     from stages.poses.sfm import SfmResult
     from stages.scene import look_at
 
