@@ -27,6 +27,12 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "(default: every frame)")
     p.add_argument("--downscale", type=int, nargs="+", default=[], metavar="F",
                    help="also write images_F/ copies downscaled by each factor (e.g. --downscale 2 4)")
+    p.add_argument("--max-side", type=int, default=None, metavar="PX",
+                   help="write the frames downscaled by the smallest integer factor that brings their longer side to "
+                        "at most PX (masks and COLMAP models of the full size still fit; default: full size)")
+    p.add_argument("--prefer-masked", type=Path, default=None, metavar="DIR",
+                   help="a frame whose source index names a file in DIR (a mask annotation, e.g. frame_00012.png) "
+                        "is kept in its window instead of a sharper one, so --count/--stride keep annotated frames")
     p.add_argument("--fps", type=float, help="frame rate of an image folder, for timestamps (videos carry their own)")
     p.add_argument("--accept-truncated", action="store_true",
                    help="keep the frames that decode when a video ends before its declared length")
@@ -49,16 +55,25 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 <= args.max_dropped <= 1:
         raise InputError(Path("--max-dropped"), f"{args.max_dropped} is not a share between 0 and 1",
                          "give --max-dropped between 0 (refuse any damaged frame) and 1")
+    if args.max_side is not None and args.max_side < 16:
+        raise InputError(Path("--max-side"), f"{args.max_side} pixels", "give --max-side of at least 16, e.g. 960")
+    if args.prefer_masked is not None and not args.prefer_masked.is_dir():
+        raise InputError(args.prefer_masked, "mask folder not found", "pass the folder of the mask annotations")
     if args.fps is not None and not args.fps > 0:
         raise InputError(Path("--fps"), f"{args.fps} frames per second", "give a positive frame rate")
     from .extraction import extract_frames
+    from .selection import indices_named_in
 
+    prefer = indices_named_in(args.prefer_masked) if args.prefer_masked is not None else frozenset()
     cfg = FramesConfig(source=args.video, out_dir=args.out, count=args.count, stride=args.stride,
-                       downscale=tuple(sorted(set(args.downscale))), fps=args.fps,
+                       downscale=tuple(sorted(set(args.downscale))), max_side=args.max_side, prefer=prefer,
+                       fps=args.fps,
                        accept_truncated=args.accept_truncated, max_dropped=args.max_dropped,
                        progress=not args.no_progress)
     s = extract_frames(cfg)
     dropped = f", dropped {s['dropped_frame_count']} damaged (frames_dropped.csv)" if s["dropped_frame_count"] else ""
+    factor = s["downscale_factor"]
+    shrunk = f" (1/{factor} of {s['source_width']}x{s['source_height']})" if factor > 1 else ""
     print(f"kept {s['n_frames']} of {s['decoded_frame_count']} frames ({s['selection']['rule']}){dropped}, "
-          f"{s['width']}x{s['height']}, {s['timings']['total']:.1f} s -> {args.out}")
+          f"{s['width']}x{s['height']}{shrunk}, {s['timings']['total']:.1f} s -> {args.out}")
     return 0

@@ -20,6 +20,11 @@ class FramesConfig:
     """Keep one frame per window of ``stride`` consecutive source frames (default 1 = every frame)."""
     downscale: tuple[int, ...] = field(default_factory=tuple)
     """Also write ``images_<f>/`` copies downscaled by each factor f (nerfstudio layout)."""
+    max_side: int | None = None
+    """Write the kept frames downscaled by the smallest integer factor that brings their longer side to at most
+    this many pixels (integer, so masks and intrinsics of the full size map exactly); None keeps the size."""
+    prefer: frozenset[int] = frozenset()
+    """Source indices kept in their window over sharper frames (frames that carry a mask annotation)."""
     fps: float | None = None
     """Frame rate of an image folder (for timestamps); ignored for videos, which carry their own."""
     accept_truncated: bool = False

@@ -26,7 +26,7 @@ from .frame_source import (
     VideoSource,
     open_source,
 )
-from .selection import WindowRule
+from .selection import WindowRule, downscale_factor, scaled_size
 from .sharpness import laplacian_variance
 
 STAGE_VERSION = "2"
@@ -103,14 +103,16 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
         for d in image_dirs.values():
             d.mkdir()
 
+        def shrink(image: np.ndarray, factor: int) -> np.ndarray:
+            return cv2.resize(image, scaled_size(image.shape[1], image.shape[0], factor), interpolation=cv2.INTER_AREA)
+
         def keep(frame: SourceFrame, score: float) -> None:
             name = frame_name(frame.source_index)
-            _write_png(image_dirs[1] / name, frame.image)
-            h, w = frame.image.shape[:2]
-            for factor in cfg.downscale:
-                small = cv2.resize(frame.image, (max(1, round(w / factor)), max(1, round(h / factor))),
-                                   interpolation=cv2.INTER_AREA)
-                _write_png(image_dirs[factor] / name, small)
+            factor = downscale_factor(frame.image.shape[1], frame.image.shape[0], cfg.max_side)
+            image = shrink(frame.image, factor) if factor > 1 else frame.image
+            _write_png(image_dirs[1] / name, image)
+            for f in cfg.downscale:
+                _write_png(image_dirs[f] / name, shrink(image, f))
             rows.append({"frame": name, "source_index": frame.source_index, "timestamp": frame.timestamp,
                          "sharpness": score})
 
@@ -138,7 +140,9 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
                 if best is not None and window != best[0]:
                     keep(best[2], best[1])
                     best = None
-                if best is None or score > best[1]:
+                # a frame with a mask annotation wins its window (the labels stage needs it), else the sharpest
+                rank = (frame.source_index in cfg.prefer, score)
+                if best is None or rank > (best[2].source_index in cfg.prefer, best[1]):
                     best = (window, score, frame)
         if best is not None:
             keep(best[2], best[1])
@@ -153,6 +157,8 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
                 f"(truncated or corrupt from frame {n_read} on)",
                 REENCODE_FIX + f", or pass --accept-truncated to keep what the first {n_read} frames give")
 
+        factor = downscale_factor(*size, cfg.max_side) if size else 1
+        written = scaled_size(*size, factor) if size else None
         table = pd.DataFrame(rows, columns=["frame", "source_index", "timestamp", "sharpness"])
         table.to_csv(out / "frames.csv", index=False)
         dropped_rows = [{"frame": frame_name(d.source_index), "source_index": d.source_index,
@@ -171,11 +177,17 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "dropped_frame_count": len(dropped),
             "max_dropped": cfg.max_dropped,
             "dropped": [{k: v for k, v in r.items() if k != "timestamp"} for r in dropped_rows],
-            "width": size[0] if size else None,
-            "height": size[1] if size else None,
+            "width": written[0] if written else None,
+            "height": written[1] if written else None,
+            "source_width": size[0] if size else None,
+            "source_height": size[1] if size else None,
+            "max_side": cfg.max_side,
+            "downscale_factor": factor,
             "n_frames": len(rows),
             "selection": {"count": cfg.count, "stride": cfg.stride, "rule": rule.describe(),
-                          "score": "variance of the Laplacian of the grey image"},
+                          "score": "variance of the Laplacian of the grey image",
+                          "preferred": len(cfg.prefer), "preferred_kept": sum(
+                              int(r["source_index"]) in cfg.prefer for r in rows)},
             "downscale": {f"images_{f}": f for f in cfg.downscale},
             "sharpness_all": [None if s is None else round(s, 4) for s in all_sharpness],
             "timings": {"total": time.perf_counter() - t_start},

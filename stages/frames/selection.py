@@ -7,7 +7,9 @@ while a blurred frame is replaced by a sharper neighbour.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from pathlib import Path
 
 
 @dataclass(frozen=True)
@@ -54,3 +56,26 @@ def sharpest_per_window(sharpness: list[float], rule: WindowRule) -> list[int]:
         if w not in best or score > sharpness[best[w]]:
             best[w] = position
     return [best[w] for w in sorted(best)]
+
+
+def downscale_factor(width: int, height: int, max_side: int | None) -> int:
+    """Smallest integer factor that brings the longer side to at most ``max_side`` (1 without a limit)."""
+    if not max_side:
+        return 1
+    return max(1, -(-max(width, height) // max_side))
+
+
+def scaled_size(width: int, height: int, factor: int) -> tuple[int, int]:
+    """(width, height) of an image downscaled by ``factor`` (OpenCV's order; at least one pixel)."""
+    return max(1, round(width / factor)), max(1, round(height / factor))
+
+
+def indices_named_in(folder: Path) -> frozenset[int]:
+    """Source indices that files in ``folder`` name (the last run of digits of each stem: frame_00012.png,
+    0012.npy, IMG_0012.png), as the labels stage matches masks to frames."""
+    found = set()
+    for path in Path(folder).iterdir():
+        digits = re.findall(r"\d+", path.stem)
+        if path.is_file() and digits:
+            found.add(int(digits[-1]))
+    return frozenset(found)

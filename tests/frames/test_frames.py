@@ -154,3 +154,41 @@ def test_bad_options(tmp_path: Path, blur_video: Path, capsys: pytest.CaptureFix
         code, err = run_cli(capsys, "--video", str(blur_video), "--out", str(tmp_path / "o"), "--max-dropped", share)
         assert code == 2 and "--max-dropped" in err and "fix:" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_max_side_writes_an_integer_downscale(blur_video: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "frames"
+    code = main(["--video", str(blur_video), "--out", str(out), "--max-side", "40", "--downscale", "2",
+                 "--no-progress"])
+    assert code == 0 and "1/3 of 96x64" in capsys.readouterr().out
+    meta = json.loads((out / "frames.json").read_text())
+    # 96 px / 40 -> factor 3 (the smallest integer that fits), so 32x21 and masks of 96x64 map exactly
+    assert (meta["downscale_factor"], meta["width"], meta["height"]) == (3, 32, 21)
+    assert (meta["source_width"], meta["source_height"], meta["max_side"]) == (96, 64, 40)
+    image = cv2.imread(str(out / "images" / "frame_00003.png"))
+    assert image.shape[:2] == (21, 32)
+    assert cv2.imread(str(out / "images_2" / "frame_00003.png")).shape[:2] == (10, 16)  # copies from the written size
+    expected = cv2.resize(textured_frame(3), (32, 21),
+                          interpolation=cv2.INTER_AREA)
+    assert np.abs(image.astype(float) - expected).mean() < 12  # the frame itself, area-averaged
+    # a limit above the size keeps it
+    same = extract_frames(FramesConfig(source=blur_video, out_dir=tmp_path / "same", max_side=96, progress=False))
+    assert (same["downscale_factor"], same["width"]) == (1, 96)
+
+
+def test_annotated_frames_win_their_window(blur_video: Path, tmp_path: Path) -> None:
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for i in (1, 8, 14):  # blurred frames that carry a mask annotation (SHARP is 3, 6, 12, 19)
+        (masks / f"frame_{i:05d}.png").write_bytes(b"")
+    (masks / "mapping.yaml").write_text("1: door\n")  # no digits: names no frame
+    out = tmp_path / "frames"
+    assert main(["--video", str(blur_video), "--out", str(out), "--stride", "5", "--prefer-masked", str(masks),
+                 "--no-progress"]) == 0
+    # windows [0-4] [5-9] [10-14] [15-19]: the annotated frame, else the sharpest
+    assert read_table(out)["source_index"].tolist() == [1, 8, 14, 19]
+    selection = json.loads((out / "frames.json").read_text())["selection"]
+    assert (selection["preferred"], selection["preferred_kept"]) == (3, 3)
+    assert main(["--video", str(blur_video), "--out", str(out), "--prefer-masked", str(tmp_path / "none"),
+                 "--no-progress"]) == 2

@@ -70,6 +70,9 @@ def test_scene_without_names_skips_language(mixed_plan):
         assert not any("--language-targets" in t for t in jobs["train"])
     filmed = mixed_plan.scene_jobs("filmed")
     assert {"frames", "poses", "labels", "states", "assemble"} <= set(filmed)
+    # a long or large video is cut to config frames.count and .max_side, keeping the annotated frames
+    frames = filmed["frames"][0]
+    assert "--count 300 --max-side 960 --prefer-masked" in frames and "/masks" in frames
     assert not any("--missing-masks" in t for t in filmed["labels"])  # the default, the stage's own: propagate
     assert "capture" not in filmed and "pose_compare" not in filmed
     assert "frames" not in mixed_plan.scene_jobs("plain")

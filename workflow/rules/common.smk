@@ -39,6 +39,17 @@ def frames_input(wildcards):
     return capture_dir(scene) if source(scene) == "synthetic" else row(scene)["path"]
 
 
+def frames_selection(wildcards):
+    """--count / --max-side of config frames, and the scene's mask folder whose frames are kept first."""
+    c = config["frames"]
+    args = [f" --count {c['count']}"] if c["count"] else []
+    args += [f" --max-side {c['max_side']}"] if c["max_side"] else []
+    scene = wildcards.scene
+    if source(scene) != "synthetic" and carries(scene, "masks") and Path(row(scene)["masks"]).is_dir():
+        args.append(f" --prefer-masked {shlex.quote(row(scene)['masks'])}")
+    return "".join(args)
+
+
 def frames_video(wildcards, input):
     return str(Path(input[0], "video.mp4")) if source(wildcards.scene) == "synthetic" else input[0]
 

@@ -13,6 +13,7 @@ rule frames:
     params:
         cli=LIVESCENE,
         video=frames_video,
+        select=frames_selection,
     threads: 1
     resources:
         mem_mb=2000,
@@ -20,4 +21,4 @@ rule frames:
     conda:
         ENV
     shell:
-        "{params.cli} frames --video {params.video} --out {output} --no-progress > {log} 2>&1"
+        "{params.cli} frames --video {params.video} --out {output}{params.select} --no-progress > {log} 2>&1"
