@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -124,3 +125,19 @@ def test_cli_says_what_it_did(tiny_dataset: SceneDataset, tmp_path: Path) -> Non
     bad = subprocess.run([sys.executable, "-m", "stages.cli", "dataset", "orient", "--data", str(src), "--out",
                           str(tmp_path / "x"), "--points", str(tmp_path / "none.ply")], capture_output=True, text=True)
     assert bad.returncode == 2 and "none.ply" in bad.stderr and "point cloud not found" in bad.stderr
+
+
+def test_images_outside_the_dataset_are_brought_into_the_copy(tiny_dataset: SceneDataset, tmp_path: Path) -> None:
+    """A transforms.json may name images beside its folder (`../frames/images/...`, as a POSES folder does)."""
+    src = _ready_dataset(tiny_dataset, Rotation.from_euler("x", 25.0, degrees=True).as_matrix(), np.zeros(3))
+    outside = tmp_path / "shared_images"
+    (src / "images").rename(outside)
+    data = json.loads((src / "transforms.json").read_text())
+    for frame in data["frames"]:
+        frame["file_path"] = "../shared_images/" + Path(frame["file_path"]).name
+    data.pop("train_filenames"), data.pop("val_filenames"), data.pop("test_filenames")
+    (src / "transforms.json").write_text(json.dumps(data))
+    ds, how = orient_dataset(src, tmp_path / "oriented")
+    assert how.turned
+    assert [f.file_path for f in ds.frames] == [f"images/{Path(p['file_path']).name}" for p in data["frames"]]
+    assert all(ds.image_path(f).is_file() and ds.image_path(f).parent == ds.root / "images" for f in ds.frames)
