@@ -2,7 +2,7 @@
 
     livescene dataset assemble --frames FRAMES --poses POSES|transforms.json [--labels LABELS]
                                [--states STATES] [--prompts prompts.yaml] --out DS
-    livescene dataset orient --data READY_DS [--points PLY] --out DS
+    livescene dataset orient --data READY_DS [--points PLY | --no-triangulate] --out DS
 
 ``orient`` writes a copy of a ready dataset (poses that came with the data) in the upright, wall-aligned
 world of the poses stage, or unchanged with the reason (docs/poses.md, "World frame").
@@ -41,6 +41,10 @@ def build_parser(prog: str = "livescene dataset") -> argparse.ArgumentParser:
     o.add_argument("--data", required=True, type=Path, help="scene dataset whose poses came with the data (only read)")
     o.add_argument("--points", type=Path, default=None,
                    help="point cloud in the poses' world (default: the dataset's ply_file_path)")
+    o.add_argument("--no-triangulate", action="store_true",
+                   help="without a point cloud, keep the world instead of triangulating points from the images at "
+                        "their given poses (COLMAP, about a second per image on one core)")
+    o.add_argument("--seed", type=int, default=0, help="COLMAP's random seed for the triangulation")
     o.add_argument("--out", required=True, type=Path, help="folder of the oriented copy")
     return parser
 
@@ -62,7 +66,7 @@ def assemble(args: argparse.Namespace) -> int:
 def orient(args: argparse.Namespace) -> int:
     from .orient import orient_dataset  # imported on use: it loads open3d and pycolmap
 
-    ds, how = orient_dataset(args.data, args.out, args.points)
+    ds, how = orient_dataset(args.data, args.out, args.points, triangulate=not args.no_triangulate, seed=args.seed)
     verb = "turned upright" if how.turned else "world kept"
     print(f"{args.out}: {len(ds.frames)} frames, {verb}: {how.reason}")
     return 0

@@ -5,12 +5,13 @@ in whatever world their tool left them in; COLMAP's leaves a room's floor and wa
 axes, and every field of the model stage factorises space into axis-aligned planes (docs/poses.md, "World
 frame": the upright world was worth 0.5-1.1 dB held-out on the demo). This writes a copy of the dataset whose
 poses, point cloud and scene box are in the frame ``stages.poses.world_frame`` estimates from the dataset's
-own point cloud (``ply_file_path``, or ``--points``); the source folder is only read.
+own point cloud (``ply_file_path``, or ``--points``; without one, points triangulated from its images at the
+given poses, triangulation.py); the source folder is only read.
 
 The world is kept as it is, and the copy says why, when
 
-- there is no point cloud: the cameras' up vector alone is biased by their pitch (20 degrees on the demo
-  capture), so turning by it could tilt an upright dataset;
+- there is no point cloud and triangulation is off: the cameras' up vector alone is biased by their pitch
+  (20 degrees on the demo capture), so turning by it could tilt an upright dataset;
 - the points show no floor or ceiling (the up vector would come from the cameras alone);
 - the dataset's axes already lie within ``ALIGNED_DEG`` of the estimated ones, up to a relabelling of
   the axes (a dataset written from a capture's truth, or already oriented).
@@ -89,8 +90,8 @@ def estimate_orientation(ds: SceneDataset, cloud: o3d.geometry.PointCloud | None
     """Decide whether and how to turn ``ds`` (see the module docstring)."""
     keep = np.eye(4)
     if cloud is None:
-        return Orientation(False, "no point cloud (ply_file_path or --points): the cameras' up vector alone is "
-                                  "biased by their pitch", keep, None, None, None)
+        return Orientation(False, "no point cloud (ply_file_path or --points) and no triangulation: the cameras' "
+                                  "up vector alone is biased by their pitch", keep, None, None, None)
     kept = np.asarray(inlier_points(cloud).points)
     c2w = np.stack([np.asarray(f.c2w, dtype=np.float64) for f in ds.frames])
     if len(kept) <= NORMAL_NEIGHBOURS:
@@ -113,16 +114,25 @@ def _inside(rel: str) -> bool:
     return not Path(rel).is_absolute() and ".." not in parts
 
 
-def orient_dataset(src: str | Path, out: str | Path, points: str | Path | None = None) -> tuple[SceneDataset,
-                                                                                                 Orientation]:
-    """Write ``src`` to ``out`` in the upright world (or unchanged, with the reason); return both."""
+def orient_dataset(src: str | Path, out: str | Path, points: str | Path | None = None, triangulate: bool = True,
+                   seed: int = 0) -> tuple[SceneDataset, Orientation]:
+    """Write ``src`` to ``out`` in the upright world (or unchanged, with the reason); return both.
+
+    Without a point cloud (``points`` or the dataset's ``ply_file_path``) and with ``triangulate``, the points
+    are triangulated from the dataset's images at their given poses (triangulation.py)."""
     src, out = Path(src), Path(out)
     if src.resolve() == out.resolve():
         raise SceneError(out, "the output folder is the dataset itself", "write the oriented copy elsewhere")
     ds = read_scene(src)
     ppath = _points_path(ds, None if points is None else Path(points))
     cloud = _read_points(ppath) if ppath is not None else None
-    orient = estimate_orientation(ds, cloud, None if ppath is None else str(ppath))
+    origin = None if ppath is None else str(ppath)
+    if cloud is None and triangulate:
+        from .triangulation import triangulate_dataset  # imported on use: COLMAP runs only here
+
+        cloud = triangulate_dataset(ds, seed)
+        origin = f"triangulated from the given poses ({len(cloud.points)} points)"
+    orient = estimate_orientation(ds, cloud, origin)
     m = orient.new_from_old
 
     frames, names = [], {}
