@@ -56,6 +56,11 @@ class VideoSpec:
     """Number of video frames."""
     fov_deg: float = 65.0
     """Horizontal field of view, degrees (square pixels, centred principal point)."""
+    exposure_jitter: float = 0.0
+    """Standard deviation of each frame's log gain, as a phone's auto exposure moves it (0 = constant exposure).
+    The video and truth/images carry it; the truth renderer renders at the nominal exposure."""
+    white_balance_jitter: float = 0.0
+    """Standard deviation of each frame's per-channel log gain (auto white balance; 0 = none)."""
 
 
 @dataclass
@@ -271,6 +276,9 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     if v.width < 8 or v.height < 8 or v.n_frames < 1 or v.fps <= 0 or not 1 < v.fov_deg < 170:
         raise CaptureSpecError(path, f"video {dataclasses.asdict(v)} is out of range",
                                "use width, height >= 8, n_frames >= 1, fps > 0, 1 < fov_deg < 170")
+    if not (0.0 <= v.exposure_jitter <= 1.0 and 0.0 <= v.white_balance_jitter <= 1.0):
+        raise CaptureSpecError(path, f"video.exposure_jitter {v.exposure_jitter} / white_balance_jitter "
+                               f"{v.white_balance_jitter} out of range", "give log-gain deviations in [0, 1], e.g. 0.1")
     _vec(spec.room, 3, path, "room", positive=True)
     if spec.units.per_metre <= 0:
         raise CaptureSpecError(path, "units.per_metre must be > 0", "write 1 for metres, 1000 for millimetres")

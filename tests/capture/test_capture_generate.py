@@ -92,3 +92,27 @@ def test_truth_pose_reprojects_a_known_corner(tmp_path, small_spec, per_metre):
     assert pixel_dist < 1.0, (u, v, uu[near][best], vv[near][best])
     footprint = z[0] / camera.fx  # one pixel at the corner's depth
     assert np.linalg.norm(world[best] - corner) < 1.5 * footprint
+
+
+def test_exposure_jitter_scales_each_frame_and_leaves_the_truth_nominal(tmp_path, small_spec):
+    plain = small_spec(n_frames=4, width=48, height=36)
+    base = generate_capture(plain, tmp_path / "plain", progress=False)
+    jittery = small_spec(n_frames=4, width=48, height=36)
+    jittery.video.exposure_jitter, jittery.video.white_balance_jitter = 0.2, 0.05
+    out = generate_capture(jittery, tmp_path / "jitter", progress=False)
+    gains = np.array(json.loads((out / "capture.json").read_text())["frame_gains"])
+    assert gains.shape == (4, 3) and np.ptp(gains.mean(1)) > 0.05  # the frames differ in exposure
+    assert json.loads((base / "capture.json").read_text())["frame_gains"] is None
+    for k in range(4):
+        name = f"frame_{k:05d}.png"
+        nominal = cv2.imread(str(base / "truth" / "images" / name))[..., ::-1].astype(float)
+        seen = cv2.imread(str(out / "truth" / "images" / name))[..., ::-1].astype(float)
+        unclipped = nominal * gains[k] < 254
+        # the frame is the nominal one x its gain (both rounded to 8 bits: half a level each, the first scaled)
+        assert np.abs(seen - nominal * gains[k])[unclipped].max() <= 0.5 * (1.0 + gains[k].max()) + 1e-9
+    assert _files(base, "masks") == _files(out, "masks") and _files(base, "truth/depth") == _files(out, "truth/depth")
+    # the truth renderer, which evaluation reads, renders at the nominal exposure
+    truth = json.loads((out / "truth" / "transforms.json").read_text())["frames"][0]
+    rendered = TruthRenderer.from_capture(out).render(np.array(truth["transform_matrix"]), truth["state"])["rgb"]
+    nominal = cv2.imread(str(base / "truth" / "images" / "frame_00000.png"))[..., ::-1] / 255.0
+    assert np.abs(rendered - nominal).max() <= 1.0 / 255 + 1e-6
