@@ -187,6 +187,8 @@ class LossWeights:
     """Huber loss of the rendered language embedding."""
     state_mse: float = 1e-3
     """MSE of learned states against key frames (learned-state mode only)."""
+    appearance: float = 1e-2
+    """L2 of the per-frame colour corrections (``appearance.mode: affine`` only)."""
 
 
 @dataclass
@@ -201,6 +203,16 @@ class ConerfConfig:
     """Hidden layers of the density MLP (the attributes enter only here, so it needs depth)."""
     latent_dim: int = 8
     """Per-frame latent code width; learned-state mode regresses the attributes from it (key frames only)."""
+
+
+@dataclass
+class AppearanceConfig:
+    """Per-frame colour of the training images (docs/model.md, "Exposure")."""
+
+    mode: Literal["none", "affine"] = "none"
+    """``affine``: every training frame gets a learned per-channel log gain and bias applied to the rendered
+    colour in the photometric loss (a phone's auto exposure and white balance), zero at the start and
+    L2-penalised; renders and evaluation use none (the nominal colour). ``none``: the reference."""
 
 
 @dataclass
@@ -223,6 +235,8 @@ class ModelConfig:
     """Loss weights."""
     conerf: ConerfConfig = dataclasses.field(default_factory=ConerfConfig)
     """CoNeRF-style baseline settings (used by ``--method conerf`` only)."""
+    appearance: AppearanceConfig = dataclasses.field(default_factory=AppearanceConfig)
+    """Per-frame colour correction of the training images."""
 
 
 @dataclass

@@ -199,3 +199,10 @@ def test_poses_orient_false_keeps_every_world(workflow_copy, tmp_path):
     assert "--no-orient" in plan.scene_jobs("demo")["poses"][0]
     jobs = plan.scene_jobs("ready")
     assert "dataset_orient" not in jobs and all(str(ready) in t for t in jobs["train"])
+
+
+def test_appearance_correction_reaches_every_training(workflow_copy):
+    assert not any("appearance" in t for t in workflow_copy.dry_run().scene_jobs("demo")["train"])
+    affine = workflow_copy.write_config(train={"appearance": "affine"})
+    jobs = workflow_copy.dry_run("--configfile", str(affine)).scene_jobs("demo")["train"]
+    assert len(jobs) == 3 and all("--set model.appearance.mode=affine" in t for t in jobs)

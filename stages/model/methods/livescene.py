@@ -48,6 +48,8 @@ class SceneInfo:
     """Language embedding width (0 = no language table)."""
     language_levels: int = 0
     """State levels of the language targets."""
+    train_frames: list[int] = field(default_factory=list)
+    """Indices of the training frames (empty = all): the per-frame colour corrections have zero mean over them."""
 
     @property
     def n_objects(self) -> int:
@@ -84,6 +86,12 @@ class LiveSceneModel(nn.Module):
             buckets = config.language.buckets or max(info.language_levels, 2)
             self.language_table = LanguageTable(alpha, buckets, info.language_dim)
         self.schedule = ProposalSchedule(config.sampling)
+        # per-frame (log gain, bias) of each colour channel; absent unless asked for, so the reference is unchanged
+        self.appearance = nn.Parameter(torch.zeros(info.n_frames, 6)) if config.appearance.mode == "affine" else None
+        if self.appearance is not None:
+            train = torch.zeros(info.n_frames, dtype=torch.bool)
+            train[info.train_frames or slice(None)] = True
+            self.register_buffer("appearance_train", train)
         self.register_buffer("background", torch.tensor(config.sampling.background, dtype=torch.float32))
         key_states = torch.tensor(info.key_states, dtype=torch.float32).reshape(-1, alpha)
         self.register_buffer("key_times", torch.tensor(info.key_times, dtype=torch.float32))
@@ -264,7 +272,9 @@ class LiveSceneModel(nn.Module):
             if weight != 0:
                 terms[name] = weight * fn()
 
-        add("rgb", w.rgb, lambda: L.rgb_loss(out["rgb"], batch.rgb))
+        add("rgb", w.rgb, lambda: L.rgb_loss(self.frame_colour(out["rgb"], batch.frames), batch.rgb))
+        if self.appearance is not None:
+            add("appearance", w.appearance, lambda: self.frame_corrections()[batch.frames].square().mean())
         if out["proposal"]:
             add("interlevel", w.interlevel, lambda: L.interlevel_loss(out["proposal"], out["final"]))
         add("distortion", w.distortion, lambda: L.distortion_loss(out["final"][0], out["final"][1], rays.nears,
@@ -292,6 +302,22 @@ class LiveSceneModel(nn.Module):
             add("state_mse", w.state_mse, lambda: L.state_loss(self.state_field(self.key_times), self.key_states))
         return terms
 
+    def frame_corrections(self) -> torch.Tensor:
+        """Per-frame (log gain, bias) [n_frames, 6], zero-mean over the training frames.
+
+        Without the centring, a colour shift shared by every frame could sit in the corrections or in the field
+        alike, and the renders (which use none) would carry whatever part the field took."""
+        assert self.appearance is not None
+        train = self.appearance_train.unsqueeze(-1).to(self.appearance.dtype)
+        return self.appearance - (self.appearance * train).sum(0) / train.sum()
+
+    def frame_colour(self, rgb: torch.Tensor, frames: torch.Tensor) -> torch.Tensor:
+        """Rendered colour [R, 3] as the frames' cameras saw it: per-frame gain and bias (``appearance``)."""
+        if self.appearance is None:
+            return rgb
+        a = self.frame_corrections()[frames]
+        return rgb * torch.exp(a[:, :3].clamp(-3.0, 3.0)) + a[:, 3:]
+
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         """Parameters by role (all share one learning rate schedule; the split is for reporting)."""
         groups = {
@@ -303,4 +329,6 @@ class LiveSceneModel(nn.Module):
             groups["state_field"] = list(self.state_field.parameters())
         if self.language_table is not None:
             groups["language_table"] = list(self.language_table.parameters())
+        if self.appearance is not None:
+            groups["appearance"] = [self.appearance]
         return groups

@@ -1,0 +1,80 @@
+"""Per-frame colour correction of the training images (`model.appearance.mode: affine`, docs/model.md "Exposure")."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from stages.model import Trainer, build_model, load_config, load_run
+from stages.model.methods import SceneInfo
+from stages.model.ray_dataset import RayBatch
+from stages.model.rays import RayBundle
+
+INFO = SceneInfo(objects=["o0", "o1"], n_frames=6)
+
+
+def _rays(n: int) -> RayBundle:
+    g = torch.Generator().manual_seed(3)
+    d = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+    return RayBundle(torch.zeros(n, 3), d, torch.full((n,), 0.05), torch.full((n,), 1.5),
+                     torch.rand(n, 2, generator=g), torch.rand(n, generator=g))
+
+
+def _model(tiny_overrides, mode: str, method: str = "livescene"):
+    cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]", f"model.appearance.mode={mode}"])
+    torch.manual_seed(0)
+    return build_model(method, cfg.model, INFO).train()
+
+
+def test_the_reference_has_no_correction(tiny_overrides):
+    model = _model(tiny_overrides, "none")
+    assert model.appearance is None and not any("appearance" in k for k in model.state_dict())
+    rgb = torch.rand(4, 3)
+    assert model.frame_colour(rgb, torch.tensor([0, 1, 2, 3])) is rgb
+
+
+@pytest.mark.parametrize("method", ["livescene", "mk-planes", "conerf"])
+def test_the_photometric_loss_sees_each_frame_through_its_gain_and_bias(tiny_overrides, method):
+    model = _model(tiny_overrides, "affine", method)
+    assert model.appearance.shape == (6, 6) and not model.appearance.any()  # identity at the start
+    with torch.no_grad():
+        model.appearance[2] = torch.tensor([0.2, -0.1, 0.0, 0.02, 0.0, -0.03])
+    rays = _rays(16)
+    out = model(rays, step=300, generator=torch.Generator().manual_seed(0))
+    frames = torch.tensor([2] * 8 + [4] * 8)
+    target = torch.rand(16, 3, generator=torch.Generator().manual_seed(1))
+    terms = model.loss_dict(out, RayBatch(rays, target, torch.zeros(16, dtype=torch.long), frames), 300)
+    # the corrections are centred over the training frames (here all six): frame 2 keeps 5/6 of its own
+    a = model.frame_corrections().detach()
+    torch.testing.assert_close(a[2], torch.tensor([0.2, -0.1, 0.0, 0.02, 0.0, -0.03]) * 5 / 6)
+    torch.testing.assert_close(a.mean(0), torch.zeros(6), atol=1e-7, rtol=0)
+    seen = out["rgb"].detach() * torch.exp(a[frames, :3]) + a[frames, 3:]
+    w = model.config.losses
+    assert terms["rgb"].item() == pytest.approx(w.rgb * torch.mean((seen - target) ** 2).item(), rel=1e-5)
+    assert terms["appearance"].item() == pytest.approx(w.appearance * a[frames].square().mean().item(), rel=1e-6)
+
+
+def test_only_training_frames_set_the_centre(tiny_overrides):
+    cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]", "model.appearance.mode=affine"])
+    model = build_model("livescene", cfg.model, SceneInfo(objects=["o0"], n_frames=4, train_frames=[0, 2])).train()
+    with torch.no_grad():
+        model.appearance[:] = torch.arange(4.0).unsqueeze(-1).expand(4, 6)
+    a = model.frame_corrections()
+    assert a[[0, 2]].sum(0).abs().max() == 0 and (a[1] == 0).all() and (a[3] == 2).all()  # centre 1 = mean(0, 2)
+    (a[0] + 3.0 * a[1]).sum().backward()  # held-out rows take no part in the centre: only their own use reaches them
+    grad = model.appearance.grad
+    assert grad[[0, 2]].abs().gt(0).all() and (grad[1] == 3.0).all() and not grad[3].any()
+
+
+def test_renders_use_the_nominal_colour(tiny_dataset, tmp_path, tiny_config):
+    """A trained run renders the same image whatever its frames' corrections: evaluation sees nominal colour."""
+    out = tmp_path / "run"
+    Trainer(tiny_config(tiny_dataset.root, "model.appearance.mode=affine", steps=3), out, device="cpu",
+            progress=False).train()
+    run = load_run(out)
+    assert run.model.appearance is not None and run.model.appearance.shape[0] == len(tiny_dataset.frames)
+    frame = tiny_dataset.frames[0]
+    before = run.render(tiny_dataset.camera, frame.c2w, frame.state)["rgb"]
+    with torch.no_grad():
+        run.model.appearance.fill_(0.5)
+    assert (run.render(tiny_dataset.camera, frame.c2w, frame.state)["rgb"] == before).all()
