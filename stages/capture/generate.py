@@ -49,13 +49,14 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
     return np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def frame_gains(spec: CaptureSpec) -> np.ndarray:
-    """Per-frame RGB gains [n_frames, 3] of the simulated auto exposure and white balance (ones without them).
+def frame_gains(spec: CaptureSpec) -> np.ndarray | None:
+    """Per-frame RGB gains [n_frames, 3] of the simulated auto exposure and white balance (None without them).
 
-    Drawn from their own seeded stream, so a spec without jitter renders exactly as before the option existed."""
+    Drawn from their own seeded stream, and None (no multiplication, not even by one, which would round some
+    pixels the other way in float64) without jitter: such a spec renders byte for byte as before the option."""
     v = spec.video
     if not (v.exposure_jitter or v.white_balance_jitter):
-        return np.ones((v.n_frames, 3))
+        return None
     rng = np.random.default_rng([spec.seed, 0xE7])
     log_gain = rng.normal(0.0, v.exposure_jitter, (v.n_frames, 1)) + rng.normal(0.0, v.white_balance_jitter,
                                                                                 (v.n_frames, 3))
@@ -133,7 +134,8 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
                 t0 = time.perf_counter()
                 out = renderer.render(poses[i], states[i])
                 t1 = time.perf_counter()
-                bgr = to_uint8(out["rgb"] * gains[i])[..., ::-1]
+                rgb = out["rgb"] if gains is None else out["rgb"] * gains[i]  # untouched without jitter
+                bgr = to_uint8(rgb)[..., ::-1]
                 writer.write(np.ascontiguousarray(bgr))
                 name = frame_name(i)
                 cv2.imwrite(str(tmp / "masks" / f"{name}.png"), out["ids"].astype(np.uint8))
@@ -179,7 +181,7 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
             "generator": "stages.capture",
             "generator_version": GENERATOR_VERSION,
             "truth_images": "truth/images (lossless PNG)" if spec.write_truth_images else None,
-            "frame_gains": gains.round(5).tolist() if (v.exposure_jitter or v.white_balance_jitter) else None,
+            "frame_gains": None if gains is None else gains.round(5).tolist(),
             "timings": {"setup_s": round(t_setup, 3), "render_s": round(render_s, 3), "write_s": round(write_s, 3),
                         "total_s": round(time.perf_counter() - t_start, 3)},
         }
