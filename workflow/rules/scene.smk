@@ -65,8 +65,8 @@ rule dataset_orient:
         cli=LIVESCENE,
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=10,
+        mem_mb=4000,
+        runtime=30,  # minutes: without a point cloud, COLMAP triangulates on one core (~1 s per image)
     conda:
         ENV
     shell:
