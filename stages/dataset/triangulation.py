@@ -10,7 +10,6 @@ runs COLMAP by default, so the same dataset gives the same points (docs/poses.md
 
 from __future__ import annotations
 
-import shutil
 import tempfile
 from pathlib import Path
 
@@ -78,6 +77,5 @@ def triangulate_dataset(ds: SceneDataset, seed: int = 0) -> o3d.geometry.PointCl
             (work / "model").mkdir()
             pycolmap.triangulate_points(model, database, images, work / "model")
         xyz = np.array([p.xyz for p in model.points3D.values()], dtype=np.float64).reshape(-1, 3)
-        shutil.rmtree(images, ignore_errors=True)
     return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
 

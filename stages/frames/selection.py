@@ -7,9 +7,10 @@ while a blurred frame is replaced by a sharper neighbour.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
+
+from stages.scene import frame_id_of
 
 
 @dataclass(frozen=True)
@@ -71,11 +72,7 @@ def scaled_size(width: int, height: int, factor: int) -> tuple[int, int]:
 
 
 def indices_named_in(folder: Path) -> frozenset[int]:
-    """Source indices that files in ``folder`` name (the last run of digits of each stem: frame_00012.png,
-    0012.npy, IMG_0012.png), as the labels stage matches masks to frames."""
-    found = set()
-    for path in Path(folder).iterdir():
-        digits = re.findall(r"\d+", path.stem)
-        if path.is_file() and digits:
-            found.add(int(digits[-1]))
-    return frozenset(found)
+    """Source indices that files in ``folder`` name (a numeric frame id, the last ``_`` token of the stem:
+    frame_00012.png, 0012.npy, IMG_0012.png), as image folders and the labels stage read them."""
+    ids = (frame_id_of(path.stem) for path in Path(folder).iterdir() if path.is_file())
+    return frozenset(int(i) for i in ids if i.isdigit())

@@ -126,10 +126,11 @@ def scene_info(ds: SceneDataset, config: RunConfig, language: LanguageTargets | 
             if fid in index:
                 key_t.append(float(times[index[fid]]))
                 key_s.append([float(values.get(o, math.nan)) for o in ds.objects])
+    train = set(map(id, ds.frames_in("train")))
     return SceneInfo(objects=list(ds.objects), n_frames=len(ds.frames), key_times=key_t, key_states=key_s,
                      language_dim=language.dim if language else 0,
                      language_levels=int(language.levels.numel()) if language else 0,
-                     train_frames=[i for i, f in enumerate(ds.frames) if (f.split or "train") == "train"])
+                     train_frames=[i for i, f in enumerate(ds.frames) if id(f) in train])
 
 
 def lr_factor(step: int, warmup: int, total: int, final_ratio: float, time_fraction: float = 0.0) -> float:

@@ -26,16 +26,17 @@ from stages.scene import InputError, atomic_dir, frame_id_of, write_json
 
 from .colmap_files import binary_file_problem, text_file_problem
 from .errors import PoseQualityError
-from .frame_list import IMAGE_SUFFIXES, read_frame_list
+from .frame_list import IMAGE_SUFFIXES, read_frame_list, time_order
 from .model_export import (
     SUPPORTED_CAMERA_MODELS,
     drop_frames,
+    judge_camera_path,
     relative_file_path,
     transforms_dict,
     write_model_outputs,
 )
 from .quality_gate import check_trajectory, compact_names, intrinsics_warnings
-from .trajectory_check import TrajectoryJudgement, TrajectorySettings, judge_trajectory, median_point_depth
+from .trajectory_check import TrajectorySettings
 from .world_frame import orient_reconstruction
 
 STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
@@ -287,20 +288,6 @@ IMPORT_BROKEN_FIX = ("COLMAP's model holds cameras that no continuous path joins
                      "images")
 
 
-def judge_imported_path(rec: pycolmap.Reconstruction, registered: list[str], source_index: dict[str, int | None],
-                        n_frames: int, n_posed: int, settings: TrajectorySettings) -> TrajectoryJudgement:
-    """The trajectory gate's numbers for the imported cameras, in playback order (source index, else name)."""
-    if all(source_index.get(n) is not None for n in registered):
-        order = sorted(registered, key=lambda n: (source_index[n], n))
-        times = np.array([float(source_index[n]) for n in order])  # type: ignore[arg-type]
-    else:
-        order = sorted(registered)
-        times = np.arange(len(order), dtype=np.float64)
-    centres = np.array([rec.find_image_with_name(n).projection_center() for n in order]).reshape(-1, 3)
-    points = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
-    return judge_trajectory(order, centres, times, median_point_depth(centres, points), n_frames, [n_posed], settings)
-
-
 def _frames_source_kind(frames_dir: Path) -> str | None:
     """``source_kind`` of frames.json (video or images), when the folder has one."""
     try:
@@ -352,7 +339,8 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
         def check_fraction(registered: list[str], trimmed: list[str]) -> float:
             fraction = len(registered) / len(names) if names else 0.0
             if fraction < required:
-                unregistered = [n for n in names if n not in set(registered)]
+                kept = set(registered)
+                unregistered = [n for n in names if n not in kept]
                 dropped = f" ({len(trimmed)} dropped as jumps: {compact_names(trimmed)})" if trimmed else ""
                 raise PoseQualityError(origin, f"only {len(registered)} of {len(names)} {kind} ({fraction:.0%}) have "
                                        f"a posed image in the COLMAP model {located.folder}{dropped}, below the "
@@ -391,12 +379,15 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
         timings["match"] = time.perf_counter() - t0
 
         # the camera path is judged as `livescene poses` judges its own: a model made elsewhere can be a tripod clip
-        judged = judge_imported_path(rec, registered, source_index, len(names), len(posed), cfg.trajectory)
+        ordered, times = time_order(names, source_index)
+        judged = judge_camera_path(rec, ordered, times, set(registered), [len(posed)], cfg.trajectory)
         warnings_ += check_trajectory(judged, origin, cfg.trajectory, IMPORT_BROKEN_FIX)
         drop_frames(rec, judged.trimmed)
-        registered = [n for n in registered if n not in set(judged.trimmed)]
+        trimmed = set(judged.trimmed)
+        registered = [n for n in registered if n not in trimmed]
         fraction = check_fraction(registered, judged.trimmed)
-        unregistered = [n for n in names if n not in set(registered) and n not in set(judged.trimmed)]
+        posed_or_trimmed = trimmed | set(registered)
+        unregistered = [n for n in names if n not in posed_or_trimmed]
 
         t0 = time.perf_counter()
         frame = orient_reconstruction(rec) if cfg.orient else None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,3 +46,12 @@ def read_frame_list(frames_dir: Path) -> FrameList:
             fid = frame_id_of(Path(name).stem)
             index[name] = int(fid) if fid.isdigit() else None
     return FrameList(image_dir=image_dir, names=names, source_index={n: index[n] for n in names})
+
+
+def time_order(names: list[str], source_index: Mapping[str, int | None]) -> tuple[list[str], dict[str, float]]:
+    """``names`` in playback order with their time: the source index, or the position in name order."""
+    if all(source_index.get(n) is not None for n in names):
+        ordered = sorted(names, key=lambda n: (source_index[n], n))
+        return ordered, {n: float(source_index[n]) for n in ordered}  # type: ignore[arg-type]
+    ordered = sorted(names)
+    return ordered, {n: float(k) for k, n in enumerate(ordered)}

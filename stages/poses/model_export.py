@@ -7,7 +7,7 @@ elsewhere), so both write the same POSES folder (docs/data-contract.md).
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,7 @@ from stages.scene import Camera, atomic_path, write_json
 from stages.scene.transforms import camera_to_dict
 
 from .conventions import c2w_opengl_from_cam_from_world
+from .trajectory_check import TrajectoryJudgement, TrajectorySettings, judge_trajectory, median_point_depth
 
 # COLMAP parameter order per camera model -> (fx, fy, cx, cy, distortion keys in order)
 _MODELS: dict[str, tuple[tuple[int, int, int, int], tuple[str, ...]]] = {
@@ -61,6 +62,18 @@ def drop_frames(rec: pycolmap.Reconstruction, names: list[str]) -> None:
     """Deregister the images ``names`` (trimmed by the trajectory gate): sparse/0 and transforms.json then agree."""
     for name in names:
         rec.deregister_frame(rec.find_image_with_name(name).frame_id)
+
+
+def judge_camera_path(rec: pycolmap.Reconstruction, ordered: list[str], times: dict[str, float],
+                      registered: Collection[str], model_sizes: list[int], settings: TrajectorySettings
+                      ) -> TrajectoryJudgement:
+    """The trajectory gate's numbers for the ``registered`` cameras of ``rec``, in the playback order ``ordered``
+    of all the frames (``time_order``); the structure-from-motion run and the import judge alike."""
+    order = [n for n in ordered if n in registered]
+    centres = np.array([rec.find_image_with_name(n).projection_center() for n in order]).reshape(-1, 3)
+    points = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
+    return judge_trajectory(order, centres, np.array([times[n] for n in order]), median_point_depth(centres, points),
+                            len(ordered), model_sizes, settings)
 
 
 def relative_file_path(image: Path, out_dir: Path) -> str:

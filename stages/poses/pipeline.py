@@ -17,8 +17,8 @@ from stages.scene import atomic_dir, write_json
 from .camera_motion import FeatureMotion, feature_motion
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
-from .frame_list import FrameList, read_frame_list
-from .model_export import drop_frames, registered_poses, transforms_dict, write_model_outputs
+from .frame_list import read_frame_list, time_order
+from .model_export import drop_frames, judge_camera_path, registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
     check_motion,
@@ -32,30 +32,10 @@ from .quality_gate import (
 )
 from .sfm import SfmResult, run_sfm
 from .static_check import MotionPrecheck, measure_motion
-from .trajectory_check import TrajectoryJudgement, judge_trajectory, median_point_depth
 from .world_frame import orient_reconstruction
 
 STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
 MIN_FRAMES = 3
-
-
-def time_order(frames: FrameList) -> tuple[list[str], dict[str, float]]:
-    """Frame names in playback order with their time: the source index, or the position in name order."""
-    index = frames.source_index
-    if all(index[n] is not None for n in frames.names):
-        ordered = sorted(frames.names, key=lambda n: (index[n], n))
-        return ordered, {n: float(index[n]) for n in ordered}  # type: ignore[arg-type]
-    return list(frames.names), {n: float(k) for k, n in enumerate(frames.names)}
-
-
-def judge_model(rec: pycolmap.Reconstruction, ordered: list[str], times: dict[str, float], registered: set[str],
-                sfm: SfmResult, cfg: PosesConfig) -> TrajectoryJudgement:
-    """The trajectory gate's numbers for the registered cameras of ``rec`` (in playback order)."""
-    order = [n for n in ordered if n in registered]
-    centres = np.array([rec.find_image_with_name(n).projection_center() for n in order]).reshape(-1, 3)
-    points = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
-    return judge_trajectory(order, centres, np.array([times[n] for n in order]), median_point_depth(centres, points),
-                            len(ordered), sfm.model_sizes, cfg.trajectory_settings())
 
 
 def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
@@ -77,7 +57,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
     if first is None:
         raise InputError(frames.image_dir / names[0], "image unreadable", "re-extract the frames")
     diagonal = float(np.hypot(*first.shape))
-    ordered, times = time_order(frames)
+    ordered, times = time_order(frames.names, frames.source_index)
     # a still camera is refused here in seconds, not after minutes of COLMAP (docs/poses.md, Quality gate)
     pre = measure_motion(frames.image_dir, ordered, cfg.static_motion_fraction, cfg.masks_dir)
     check_precheck(pre, ordered, cfg.frames_dir)
@@ -116,7 +96,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         min_fraction = max(cfg.min_registered, 2 / len(names))
         check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
         assert rec is not None  # the gate above rejects an empty result
-        judged = judge_model(rec, ordered, times, registered, sfm, cfg)
+        judged = judge_camera_path(rec, ordered, times, registered, sfm.model_sizes, cfg.trajectory_settings())
         warnings_ += check_trajectory(judged, cfg.frames_dir, cfg.trajectory_settings(),
                                       registration_advice(cfg, sfm.matcher), motion, pre)
         drop_frames(rec, judged.trimmed)

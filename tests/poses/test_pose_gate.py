@@ -188,8 +188,7 @@ def test_trimmed_frames_leave_the_model(tmp_path: Path) -> None:
     import pycolmap
 
     from stages.poses import cam_from_world_from_c2w_opengl
-    from stages.poses.model_export import drop_frames, transforms_dict
-    from stages.poses.pipeline import judge_model
+    from stages.poses.model_export import drop_frames, judge_camera_path, transforms_dict
     from stages.poses.sfm import SfmResult
     from stages.scene import look_at
 
@@ -206,8 +205,8 @@ def test_trimmed_frames_leave_the_model(tmp_path: Path) -> None:
     for xyz in np.random.default_rng(0).uniform(-0.5, 0.5, (200, 3)):
         rec.add_point3D(xyz, pycolmap.Track())
     sfm = SfmResult(reconstruction=rec, n_models=1, matcher="sequential", model_sizes=[30])
-    judged = judge_model(rec, frame_names, {n: float(k) for k, n in enumerate(frame_names)}, set(frame_names), sfm,
-                         gate(tmp_path))
+    judged = judge_camera_path(rec, frame_names, {n: float(k) for k, n in enumerate(frame_names)}, set(frame_names),
+                               sfm.model_sizes, gate(tmp_path).trajectory_settings())
     assert judged.verdict == "trim" and judged.trimmed == ["frame_00012.png"]
     assert judged.median_point_depth == pytest.approx(3.0, abs=0.3) and judged.max_step_ratio > 10
     drop_frames(rec, judged.trimmed)

@@ -61,6 +61,11 @@ def _render_probs(weights: torch.Tensor, logits: torch.Tensor) -> torch.Tensor:
     return render_features(weights.detach(), torch.softmax(logits.float(), -1))
 
 
+def _corrected(rgb: torch.Tensor, corrections: torch.Tensor) -> torch.Tensor:
+    """Colour [R, 3] through per-ray (log gain, bias) [R, 6] of each channel."""
+    return rgb * torch.exp(corrections[:, :3].clamp(-3.0, 3.0)) + corrections[:, 3:]
+
+
 class LiveSceneModel(nn.Module):
     """The LiveScene method; ``forward`` renders rays, ``loss_dict`` weighs every term of section 5."""
 
@@ -272,9 +277,12 @@ class LiveSceneModel(nn.Module):
             if weight != 0:
                 terms[name] = weight * fn()
 
-        add("rgb", w.rgb, lambda: L.rgb_loss(self.frame_colour(out["rgb"], batch.frames), batch.rgb))
-        if self.appearance is not None:
-            add("appearance", w.appearance, lambda: self.frame_corrections()[batch.frames].square().mean())
+        if self.appearance is None:
+            add("rgb", w.rgb, lambda: L.rgb_loss(out["rgb"], batch.rgb))
+        else:
+            corrections = self.frame_corrections()[batch.frames]
+            add("rgb", w.rgb, lambda: L.rgb_loss(_corrected(out["rgb"], corrections), batch.rgb))
+            add("appearance", w.appearance, lambda: corrections.square().mean())
         if out["proposal"]:
             add("interlevel", w.interlevel, lambda: L.interlevel_loss(out["proposal"], out["final"]))
         add("distortion", w.distortion, lambda: L.distortion_loss(out["final"][0], out["final"][1], rays.nears,
@@ -313,10 +321,7 @@ class LiveSceneModel(nn.Module):
 
     def frame_colour(self, rgb: torch.Tensor, frames: torch.Tensor) -> torch.Tensor:
         """Rendered colour [R, 3] as the frames' cameras saw it: per-frame gain and bias (``appearance``)."""
-        if self.appearance is None:
-            return rgb
-        a = self.frame_corrections()[frames]
-        return rgb * torch.exp(a[:, :3].clamp(-3.0, 3.0)) + a[:, 3:]
+        return rgb if self.appearance is None else _corrected(rgb, self.frame_corrections()[frames])
 
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         """Parameters by role (all share one learning rate schedule; the split is for reporting)."""
