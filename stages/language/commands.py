@@ -8,6 +8,11 @@ Beyond the reference's ``open X`` / ``close X`` this accepts:
   where a clause without a verb repeats the previous one ("open the fridge and the drawer");
 - every object at once: "close everything", "open all", and "everything else"/"all other" for the
   objects the rest of the command does not name;
+- exceptions: "close everything except the washer", "open all drawers but the top drawer and the
+  bottom one"... (verbless clauses after an exception extend it; the excepted objects keep their state);
+- verbs of particular joints: "lift"/"raise" (a lid or flap) and "pull out" open, "push in" and "lower"
+  (as the clause's first word only, since "lower drawer" names an object) close;
+- "but" before a verb starts a new clause ("open the fridge but close the drawer");
 - groups: "open all cabinets", "close both cupboards" (every object whose name or synonym has the word).
 
 State values are openness in [0, 1] (0 closed, 1 fully open), so "close X to 20%" leaves it 20% open.
@@ -25,7 +30,16 @@ from .encoder import TextEncoder
 from .object_resolution import CommandError, ObjectResolver, ResolverConfig, UnknownObjectError
 from .vocabulary import ObjectVocabulary, normalize_phrase
 
-_SPLIT = re.compile(r"\s*(?:,|;|\band\b|\bthen\b|\balso\b)\s*")
+OPEN_VERBS = {"open": 1.0, "opened": 1.0, "lift": 1.0, "raise": 1.0, "pull": 1.0}
+CLOSE_VERBS = {"close": 0.0, "closed": 0.0, "shut": 0.0, "push": 0.0}
+FIRST_WORD_VERBS = {"lower": 0.0}
+"""Verbs that are also adjectives of object names ("the lower drawer"): a verb only as a clause's first word."""
+PARTICLES = {"pull": ("out", "open"), "push": ("in", "shut", "closed")}
+"""Words that complete a verb ("pull out the drawer", "push the drawer in") and are no part of the object."""
+NEUTRAL_VERBS = {"set", "put", "move", "make", "turn", "leave", "adjust"}
+_ALL_VERBS = [*OPEN_VERBS, *CLOSE_VERBS, *NEUTRAL_VERBS]
+_SPLIT = re.compile(r"\s*(?:,|;|\band\b|\bthen\b|\balso\b|\bbut\b(?=\s+(?:" + "|".join(_ALL_VERBS) + r")\b))\s*")
+_EXCEPT = re.compile(r"\b(?:except(?: for)?|but(?: not)?|apart from|other than|excluding|save for)\b")
 _PERCENT = re.compile(r"(?:\bto\s+)?(-?\d+(?:\.\d+)?)\s*(?:%|\bpercent\b|\bper cent\b)")
 _FRACTION = re.compile(r"\bto\s+(-?\d*\.?\d+)\b")
 _HALF = re.compile(r"\b(?:half\s*way|half)\b")
@@ -33,9 +47,6 @@ _FULL = re.compile(r"\b(?:fully|completely|all the way|wide|entirely)\b")
 _SLIGHT = re.compile(r"\b(?:slightly|a (?:little\s+)?bit|a little)\b")
 _TO_STATE = re.compile(r"\bto\s+(?:be\s+)?(open|opened|closed|shut)\b")
 
-OPEN_VERBS = {"open": 1.0, "opened": 1.0}
-CLOSE_VERBS = {"close": 0.0, "closed": 0.0, "shut": 0.0}
-NEUTRAL_VERBS = {"set", "put", "move", "make", "turn", "leave", "adjust"}
 FILLERS = {"please", "the", "a", "an", "my", "that", "this", "can", "you", "could", "would", "now", "up", "kindly"}
 EVERYTHING = {"everything", "all", "all objects", "all the objects", "every object", "all of them", "each object",
               "everything in the room", "it all", "them all", "objects", "both", "both of them"}
@@ -57,7 +68,7 @@ class Action:
     value: float
     clause: str
     method: str
-    """How the object was found: exact, partial, fuzzy, embedding, everything or everything-else."""
+    """How the object was found: exact, partial, fuzzy, embedding, group, everything or everything-else."""
     score: float
 
 
@@ -81,6 +92,9 @@ class _Clause:
     text: str
     value: float | None
     object_phrase: str
+    excepted: list[str] = field(default_factory=list)
+    """Object phrases after "except" / "but" / "apart from": left out of an everything or group phrase."""
+    has_verb: bool = True
 
 
 def _amount(text: str, base: float | None, source: str, command: str) -> tuple[float | None, str]:
@@ -118,14 +132,16 @@ def split_clauses(command: str) -> list[str]:
 def _parse_clause(raw: str, previous_value: float | None, source: str, command: str) -> _Clause:
     words = normalize_phrase(raw).split()
     verb_value: float | None = None
-    has_verb = False
+    verb = ""
     rest: list[str] = []
-    for w in words:
-        if not has_verb and (w in OPEN_VERBS or w in CLOSE_VERBS or w in NEUTRAL_VERBS):
-            has_verb = True
-            verb_value = OPEN_VERBS.get(w, CLOSE_VERBS.get(w))
+    for i, w in enumerate(words):
+        if not verb and (w in OPEN_VERBS or w in CLOSE_VERBS or w in NEUTRAL_VERBS
+                         or (i == 0 and w in FIRST_WORD_VERBS)):
+            verb = w
+            verb_value = OPEN_VERBS.get(w, CLOSE_VERBS.get(w, FIRST_WORD_VERBS.get(w) if i == 0 else None))
             continue
         rest.append(w)
+    has_verb = bool(verb)
     if has_verb and verb_value is None:
         # "make the fridge open", "leave the drawer closed": the state word comes after the object
         for w in rest:
@@ -135,7 +151,7 @@ def _parse_clause(raw: str, previous_value: float | None, source: str, command: 
     # amounts are read from the raw text (so "0.3" and "30%" survive), after the verb is known
     text = raw
     if has_verb:
-        text = re.sub(r"\b(?:" + "|".join([*OPEN_VERBS, *CLOSE_VERBS, *NEUTRAL_VERBS]) + r")\b", " ", raw, count=1)
+        text = re.sub(rf"\b{verb}\b", " ", raw.lower(), count=1)
     base = verb_value if has_verb else previous_value
     value, text = _amount(text, base, source, command)
     if has_verb and verb_value is None and value is None:
@@ -144,9 +160,30 @@ def _parse_clause(raw: str, previous_value: float | None, source: str, command: 
     if not has_verb and value is None:
         raise CommandError(source, f'no action in "{raw.strip()}" of "{command}"',
                            'start with a verb: "open X", "close X", "half open X", "open X to 30%"')
-    phrase = " ".join(w for w in normalize_phrase(text).split() if w not in FILLERS and w not in OPEN_VERBS
-                      and w not in CLOSE_VERBS)
-    return _Clause(text=raw.strip(), value=value, object_phrase=phrase)
+    kept = [w for w in normalize_phrase(text).split() if w not in FILLERS and w not in OPEN_VERBS
+            and w not in CLOSE_VERBS]
+    particles = PARTICLES.get(verb, ())
+    if kept and kept[0] in particles:  # "pull out the drawer"
+        kept = kept[1:]
+    elif kept and kept[-1] in particles:  # "push the drawer in"
+        kept = kept[:-1]
+    head, *excepted = _EXCEPT.split(" ".join(kept), maxsplit=1)
+    return _Clause(text=raw.strip(), value=value, object_phrase=head.strip(),
+                   excepted=[excepted[0].strip()] if excepted else [], has_verb=has_verb)
+
+
+def _continue_exceptions(parsed: list[_Clause]) -> list[_Clause]:
+    """Verbless clauses right after an exception extend it: "close all except the fridge and the drawer"."""
+    out: list[_Clause] = []
+    for clause in parsed:
+        previous = out[-1] if out else None
+        if previous is not None and previous.excepted and not clause.has_verb and clause.value == previous.value \
+                and not clause.excepted:
+            previous.excepted.append(clause.object_phrase)
+            previous.text = f"{previous.text} and {clause.text}"
+            continue
+        out.append(clause)
+    return out
 
 
 class CommandParser:
@@ -178,17 +215,26 @@ class CommandParser:
             clause = _parse_clause(raw, previous, source, command)
             parsed.append(clause)
             previous = clause.value
+        parsed = _continue_exceptions(parsed)
         named: dict[int, list[tuple[str, str, float]]] = {}
+        excepted: dict[int, set[str]] = {}
         for i, clause in enumerate(parsed):
+            if clause.excepted:
+                excepted[i] = {self.resolver.resolve(p, command).object for p in clause.excepted}
             if clause.object_phrase in EVERYTHING or clause.object_phrase in EVERYTHING_ELSE:
                 continue
             group = self._group(clause.object_phrase, command)
             if group is not None:
                 named[i] = group
                 continue
+            if clause.excepted:
+                raise CommandError(source, f'"{clause.text}" in "{command}" excepts objects from one object',
+                                   'except objects from everything or a group: "close everything except the '
+                                   'fridge", "open all drawers but the top drawer"')
             r = self.resolver.resolve(clause.object_phrase, command)
             named[i] = [(r.object, r.method, r.score)]
-        mentioned = {o for items in named.values() for o, _, _ in items}
+        # an excepted object counts as named: "everything else" in a later clause leaves it alone too
+        mentioned = {o for items in named.values() for o, _, _ in items} | set().union(*excepted.values())
         actions: list[Action] = []
         for i, clause in enumerate(parsed):
             assert clause.value is not None
@@ -198,6 +244,12 @@ class CommandParser:
                 targets = [(o, "everything-else", 1.0) for o in self.objects if o not in mentioned]
             else:
                 targets = named[i]
+            outside = excepted.get(i, set()) - {o for o, _, _ in targets} if i in named else set()
+            if outside:  # "all drawers except the washer"
+                raise CommandError(source, f'"{clause.text}" in "{command}" excepts {sorted(outside)}, which '
+                                   f'"{clause.object_phrase}" does not include',
+                                   "except only objects of the group, or name them in a clause of their own")
+            targets = [t for t in targets if t[0] not in excepted.get(i, set())]
             for obj, method, score in targets:
                 states[obj] = float(clause.value)
                 actions.append(Action(obj, float(clause.value), clause.text, method, float(score)))

@@ -54,6 +54,16 @@ SUCCEEDS = [
     ("open all cabinets", _expect(upper_cabinet=1.0, lower_cabinet=1.0)),  # a group by a shared word
     ("close both cupboards and open the fridge", _expect(upper_cabinet=0.0, lower_cabinet=0.0, fridge=1.0)),
     ("close all the doors", ALL_CLOSED),  # no name has "door": every object
+    ("close everything except the fridge", {**ALL_CLOSED, "fridge": 0.2}),  # the excepted keep their state
+    ("open everything but the fridge and the drawer", _expect(upper_cabinet=1.0, lower_cabinet=1.0)),
+    ("open all cabinets except the upper cabinet", _expect(lower_cabinet=1.0)),
+    ("open the drawer and close everything else apart from the fridge", {**ALL_CLOSED, "drawer": 1.0, "fridge": 0.2}),
+    ("open the fridge but close the drawer", _expect(fridge=1.0, drawer=0.0)),  # "but" before a verb: a clause
+    ("pull out the drawer", _expect(drawer=1.0)),
+    ("push the drawer in", _expect(drawer=0.0)),
+    ("raise the wall cupboard", _expect(upper_cabinet=1.0)),
+    ("lower the fridge", _expect(fridge=0.0)),
+    ("open the lower cabinet", _expect(lower_cabinet=1.0)),  # "lower" inside a name is no verb
 ]
 
 FAILS = [
@@ -67,6 +77,8 @@ FAILS = [
     ("set the drawer", CommandError, r"neither open, closed nor an amount"),
     ("", CommandError, r"empty command"),
     ("open all ovens", UnknownObjectError, r'no object of the group "all ovens"'),
+    ("open the fridge except the drawer", CommandError, r"excepts objects from one object"),
+    ("open all cabinets except the fridge", CommandError, r"excepts \['fridge'\], which \"all cabinets\" does not"),
 ]
 
 
