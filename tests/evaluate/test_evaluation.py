@@ -75,6 +75,8 @@ def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
 
     timings = json.loads((out / "timings.json").read_text())
     assert timings["held_out"]["fps"] > 0 and timings["held_out"]["views"] == 4 and timings["seconds"] > 0
+    parts = ("held_out", "unseen_combinations", "grounding", "locality")
+    assert timings["seconds"] == pytest.approx(sum(timings[p]["seconds"] for p in parts), rel=1e-3, abs=1e-3)
     assert "fps" not in held and "render_seconds" not in held and "seconds" not in metrics
     written = json.loads((out / "metrics.json").read_text())
     assert written["held_out"]["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
