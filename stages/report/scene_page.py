@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections import defaultdict
 from html import escape
 from pathlib import Path
 from typing import Any
@@ -206,13 +207,14 @@ def _ssim_form(sd: SceneData) -> str:
 def section_methods(sd: SceneData) -> str:
     rows = []
     flags = scene_trust(sd)
+    lpips_missing: dict[str, list[str]] = defaultdict(list)  # why LPIPS is absent -> methods: said once, below
     for m in sd.methods:
         if m.run is None and m.metrics is None:
             rows.append([escape(m.name)] + [escape(_why_skipped(sd, f"train[{m.name}]"))] + [None] * 12)
             continue
         lpips = _metric(m, "held_out", "lpips", "mean")
-        lpips_cell = fmt(lpips) if lpips is not None else escape(
-            str(_metric(m, "held_out", "lpips_status") or "not available"))
+        if lpips is None and m.metrics is not None:
+            lpips_missing[str(_metric(m, "held_out", "lpips_status") or "not available")].append(m.name)
         run = m.run or {}
         params = (run.get("params") or {}).get("total")
         grounding = _metric(m, "grounding", "miou_probs")
@@ -220,7 +222,7 @@ def section_methods(sd: SceneData) -> str:
         rows.append([escape(m.name), _flag_html(flags.get(m.name)), _metric(m, "held_out", "psnr", "mean"),
                      _metric(m, "held_out", "psnr_objects", "mean"), _metric(m, "held_out", "psnr_static", "mean"),
                      _metric(m, "held_out", "ssim", "mean"),
-                     lpips_cell, _metric(m, "unseen_combinations", "psnr", "mean"),
+                     lpips, _metric(m, "unseen_combinations", "psnr", "mean"),
                      grounding if isinstance(grounding, (int, float)) else None,
                      params, run.get("peak_memory_mib"), run.get("train_seconds"), run.get("steps"),
                      fps if isinstance(fps, (int, float)) else None])
@@ -230,7 +232,8 @@ def section_methods(sd: SceneData) -> str:
             "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
             "not complete is flagged, and its numbers are not results. "
-            + _ssim_form(sd) + "</p>"
+            + _ssim_form(sd) + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}."
+                                       for why, names in lpips_missing.items()) + "</p>"
             + _flag_banner(flags)
             + table(["method", "trust", "PSNR dB", "PSNR objects dB", "PSNR static dB", "SSIM", "LPIPS",
                      "unseen PSNR dB", "grounding mIoU (probs)", "parameters", "peak memory MiB", "train s",
