@@ -3,6 +3,8 @@ with errors that name the file, the key and the row."""
 
 from __future__ import annotations
 
+import re
+
 import cv2
 import numpy as np
 import pytest
@@ -170,6 +172,24 @@ def test_imported_colmap_model_replaces_sfm_and_prompts_reach_assembly(workflow_
     assert f"--prompts {tmp_path / 'prompts.yaml'}" in jobs["assemble"][0]
     assert " dataset assemble --frames results/shots/frames " in jobs["assemble"][0]  # the dataset stage's command
     assert all(f"--truth {truth}" in t for t in jobs["evaluate"])
+
+
+def test_mask_file_reaches_colmap_through_the_labels_stage(workflow_copy, tmp_path):
+    """A mask folder goes to COLMAP as it is; a COCO / LabelMe file goes through the labels stage's id maps."""
+    video, folder, coco = tmp_path / "room.mp4", tmp_path / "masks", tmp_path / "masks.json"
+    video.write_bytes(b"")  # a dry run only needs the paths to exist
+    folder.mkdir()
+    coco.write_text("{}")
+    names = tmp_path / "mapping.yaml"
+    names.write_text("{1: fridge}")
+    row = {"source": "video", "path": video, "poses": "estimate", "key_frames": "no", "names": names,
+           "truth": "no", "methods": "livescene"}
+    workflow_copy.write_scenes([{"scene": "folder", "masks": folder, **row}, {"scene": "file", "masks": coco, **row}])
+    plan = workflow_copy.dry_run()
+    assert f"--masks {folder} " in plan.scene_jobs("folder")["poses"][0]
+    poses = plan.scene_jobs("file")["poses"][0]
+    inputs = re.search(r"^\s*input: (.*)$", poses, re.M)
+    assert "--masks results/file/labels/masks " in poses and inputs and "results/file/labels" in inputs.group(1)
 
 
 def test_only_builds_the_named_scenes(workflow_copy):

@@ -121,13 +121,19 @@ def poses_input(wildcards):
         files["capture"] = capture_dir(scene)
     elif carries(scene, "masks") and Path(row(scene)["masks"]).is_dir():
         files["masks"] = row(scene)["masks"]
+    elif carries(scene, "masks") and Path(row(scene)["masks"]).is_file():
+        # a COCO / LabelMe file: COLMAP reads the labels stage's id maps of it (docs/poses.md)
+        files["labels"] = R(scene, "labels")
     return files
 
 
 def poses_masks(wildcards, input):
-    """PNG id maps that keep SIFT features off the moving objects (when the scene has them as a folder)."""
+    """Id maps that keep SIFT features off the moving objects: the capture's, the user's folder, or the labels
+    stage's maps of a mask file."""
     if "capture" in input.keys():
         return f"--masks {Path(input.capture, 'masks')}"
+    if "labels" in input.keys():
+        return f"--masks {Path(input.labels, 'masks')}"
     return f"--masks {input.masks}" if "masks" in input.keys() else ""
 
 
