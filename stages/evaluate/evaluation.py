@@ -375,8 +375,16 @@ class Evaluator:
         frames = _evenly(self.ds.frames_in("test"), self.config.locality_views)
         if not frames or not self.ds.objects:
             return {"status": "skipped: no held-out view or no object"}
-        return locality(lambda f, st: self._render(f, st, rgb_only=True)["rgb"], self.truth, frames, self._camera,
-                        self.ds.objects)
+        renders = 0
+
+        def render(frame: Frame, states: dict[str, float]) -> np.ndarray:
+            nonlocal renders
+            renders += 1
+            return self._render(frame, states, rgb_only=True)["rgb"]
+
+        out = locality(render, self.truth, frames, self._camera, self.ds.objects)
+        self.timings["locality"] = {"model_renders": renders}
+        return out
 
     # -- everything -----------------------------------------------------------------------------------------
     def evaluate(self, out_dir: Path | None = None) -> dict[str, Any]:
@@ -391,7 +399,7 @@ class Evaluator:
         t3 = time.perf_counter()
         local = self.locality()
         t4 = time.perf_counter()
-        self.timings["locality"] = {"seconds": t4 - t3}
+        self.timings.setdefault("locality", {})["seconds"] = t4 - t3
         self.timings["held_out"]["seconds"] = t1 - t0
         self.timings.setdefault("unseen_combinations", {})["seconds"] = t2 - t1
         self.timings["grounding"] = {"seconds": t3 - t2}

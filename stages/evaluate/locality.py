@@ -35,14 +35,37 @@ RenderFn = Callable[[Frame, dict[str, float]], np.ndarray]
 """(frame, states) -> the run's rgb [H, W, 3] at the evaluation camera."""
 
 
-def swept_region(truth: Any, frame: Frame, camera: Camera, name: str, base: dict[str, float]) -> np.ndarray:
-    """Pixels [H, W] the truth object ``name`` or its cast shadows cover at any of SWEPT_STATES states, dilated."""
-    tcam = truth.camera_for(camera.width, camera.height)
-    c2w, _ = truth.pose_for(frame)
+class _Renders:
+    """Renders of one view keyed by their state vector: the objects' 0 / 1 renders and the swept region's end
+    states repeat (an object already at 0 or 1 in the view's own state makes its lo or hi render the view's own,
+    shared by every other object at 0 or 1), and rendering a state again gives the same image."""
+
+    def __init__(self, render: Callable[[dict[str, float]], Any]) -> None:
+        self.render, self.done = render, {}
+
+    def __call__(self, states: dict[str, float]) -> Any:
+        key = tuple(sorted(states.items()))
+        if key not in self.done:
+            self.done[key] = self.render(states)
+        return self.done[key]
+
+
+def swept_region(truth: Any, frame: Frame, camera: Camera, name: str, base: dict[str, float],
+                 truth_render: Callable[[dict[str, float]], dict[str, Any]] | None = None) -> np.ndarray:
+    """Pixels [H, W] the truth object ``name`` or its cast shadows cover at any of SWEPT_STATES states, dilated.
+
+    ``truth_render`` (states -> the truth renderer's output at this view) defaults to rendering each state."""
+    if truth_render is None:
+        tcam = truth.camera_for(camera.width, camera.height)
+        c2w, _ = truth.pose_for(frame)
+
+        def truth_render(states: dict[str, float]) -> dict[str, Any]:
+            return truth.renderer.render(c2w, states, camera=tcam)
+
     obj = truth.object_ids[name]
     region = np.zeros((camera.height, camera.width), dtype=bool)
     for value in np.linspace(0.0, 1.0, SWEPT_STATES):
-        out = truth.renderer.render(c2w, dict(base, **{name: float(value)}), camera=tcam)
+        out = truth_render(dict(base, **{name: float(value)}))
         region |= out["ids"] == obj
         if "shadow_ids" in out:  # [lights, H, W]: which object casts the shadow on each pixel
             region |= (np.asarray(out["shadow_ids"]) == obj).any(axis=0)
@@ -60,14 +83,16 @@ def locality(render: RenderFn, truth: Any, frames: Sequence[Frame], camera_of: C
         base = {o: own.get(o, 0.0) for o in objects}
         tcam = truth.camera_for(camera.width, camera.height)
         c2w, _ = truth.pose_for(frame)
+        model_render = _Renders(lambda st, f=frame: render(f, st))
+        truth_render = _Renders(lambda st, c=c2w, t=tcam: truth.renderer.render(c, st, camera=t))
         for name in objects:
             if name not in truth.object_ids:
                 continue
-            region = swept_region(truth, frame, camera, name, base)
+            region = swept_region(truth, frame, camera, name, base, truth_render)
             lo, hi = dict(base, **{name: 0.0}), dict(base, **{name: 1.0})
-            model = np.abs(np.asarray(render(frame, lo), np.float64) - np.asarray(render(frame, hi), np.float64))
-            t_lo = truth.renderer.render(c2w, lo, camera=tcam)["rgb"]
-            t_hi = truth.renderer.render(c2w, hi, camera=tcam)["rgb"]
+            model = np.abs(np.asarray(model_render(lo), np.float64) - np.asarray(model_render(hi), np.float64))
+            t_lo = truth_render(lo)["rgb"]
+            t_hi = truth_render(hi)["rgb"]
             true = np.abs(np.asarray(t_lo, np.float64) - np.asarray(t_hi, np.float64))
             model, true = model.mean(axis=-1) * 255.0, true.mean(axis=-1) * 255.0
             records.append({

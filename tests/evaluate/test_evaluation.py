@@ -12,6 +12,7 @@ from tiny_language_run import BagOfWordsEncoder
 
 from stages.evaluate import EvaluateConfig, TruthSource, evaluate_run, read_sim3
 from stages.evaluate import cli as evaluate_cli
+from stages.evaluate.locality import locality
 from stages.language import Grounder, ObjectVocabulary
 from stages.scene import Frame, InputError, apply_similarity_to_pose
 
@@ -263,6 +264,38 @@ def test_locality_passes_a_local_run_and_fails_one_that_repaints_the_room(eval_s
     leaky = evaluate_run(Repaints(ds, truth.renderer), ds, tmp_path / "leaky", truth, None, cfg)["locality"]
     assert not leaky["all_local"]
     assert leaky["objects"]["drawer"]["model_outside_x255"]["mean"] == pytest.approx(0.02 * 255, abs=0.5)
+
+
+def test_locality_renders_each_state_vector_of_a_view_once(eval_scene, monkeypatch):
+    """An object at 0 or 1 in the view's own state shares its lo or hi render with every other such object, and
+    the swept region's end states are the truth's lo / hi renders: each is rendered once, the records unchanged."""
+    ds, _, truth = eval_scene
+    frames, objects = ds.frames_in("test")[:2], ds.objects
+    calls, truth_calls = [], []
+
+    def render(frame, states):
+        calls.append((frame.frame_id, tuple(sorted(states.items()))))
+        cam = ds.camera_of(frame)  # an image that follows the states (the fake run would call the truth too)
+        return np.full((cam.height, cam.width, 3), 0.1 + 0.2 * states["fridge"] + 0.3 * states["drawer"])
+
+    truth_render = truth.renderer.render
+
+    def counted(c2w, states, camera=None):
+        truth_calls.append((np.asarray(c2w).tobytes(), tuple(sorted(states.items()))))
+        return truth_render(c2w, states, camera=camera)
+
+    first = locality(render, truth, frames, ds.camera_of, objects)
+    monkeypatch.setattr(truth.renderer, "render", counted)
+    calls.clear()
+    again = locality(render, truth, frames, ds.camera_of, objects)
+    assert again["records"] == first["records"]
+    assert len(calls) == len(set(calls)) and len(truth_calls) == len(set(truth_calls))
+    wanted = set()
+    for frame in frames:
+        base = {o: float((truth.state_for(frame) or {}).get(o, 0.0)) for o in objects}
+        wanted |= {(frame.frame_id, tuple(sorted(dict(base, **{o: v}).items()))) for o in objects for v in (0.0, 1.0)}
+    assert set(calls) == wanted
+    assert len(wanted) < 2 * len(objects) * len(frames)  # the fixture's views hold an object at 0 or 1
 
 
 def test_a_turned_copy_of_a_truth_world_dataset_is_aligned_by_its_turn(eval_scene):
