@@ -8,8 +8,8 @@ Beyond the reference's ``open X`` / ``close X`` this accepts:
   where a clause without a verb repeats the previous one ("open the fridge and the drawer");
 - every object at once: "close everything", "open all", and "everything else"/"all other" for the
   objects the rest of the command does not name;
-- exceptions: "close everything except the washer", "open all drawers but the top drawer and the
-  bottom one"... (verbless clauses after an exception extend it; the excepted objects keep their state);
+- exceptions: "close everything except the washer and the fridge", "open all drawers but the top drawer"
+  (verbless clauses after an exception extend it; the excepted objects keep their state);
 - verbs of particular joints: "lift"/"raise" (a lid or flap) and "pull out" open, "push in" and "lower"
   (as the clause's first word only, since "lower drawer" names an object) close;
 - "but" before a verb starts a new clause ("open the fridge but close the drawer");
