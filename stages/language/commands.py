@@ -227,11 +227,13 @@ class CommandParser:
             if group is not None:
                 named[i] = group
                 continue
-            if clause.excepted:
-                raise CommandError(source, f'"{clause.text}" in "{command}" excepts objects from one object',
-                                   'except objects from everything or a group: "close everything except the '
-                                   'fridge", "open all drawers but the top drawer"')
             r = self.resolver.resolve(clause.object_phrase, command)
+            if r.object in excepted.get(i, set()):
+                raise CommandError(source, f'"{clause.text}" in "{command}" excepts the object it names',
+                                   'name the object, or except objects from everything or a group: "close '
+                                   'everything except the fridge"')
+            # "open the fridge but not the drawer": the drawer is left as it is anyway
+            excepted.pop(i, None)
             named[i] = [(r.object, r.method, r.score)]
         # an excepted object counts as named: "everything else" in a later clause leaves it alone too
         mentioned = {o for items in named.values() for o, _, _ in items} | set().union(*excepted.values())
