@@ -50,20 +50,11 @@ class _Renders:
         return self.done[key]
 
 
-def swept_region(truth: Any, frame: Frame, camera: Camera, name: str, base: dict[str, float],
-                 truth_render: Callable[[dict[str, float]], dict[str, Any]] | None = None) -> np.ndarray:
-    """Pixels [H, W] the truth object ``name`` or its cast shadows cover at any of SWEPT_STATES states, dilated.
-
-    ``truth_render`` (states -> the truth renderer's output at this view) defaults to rendering each state."""
-    if truth_render is None:
-        tcam = truth.camera_for(camera.width, camera.height)
-        c2w, _ = truth.pose_for(frame)
-
-        def truth_render(states: dict[str, float]) -> dict[str, Any]:
-            return truth.renderer.render(c2w, states, camera=tcam)
-
-    obj = truth.object_ids[name]
-    region = np.zeros((camera.height, camera.width), dtype=bool)
+def swept_region(truth_render: Callable[[dict[str, float]], dict[str, Any]], obj: int, name: str,
+                 base: dict[str, float], shape: tuple[int, int]) -> np.ndarray:
+    """Pixels [H, W] the truth object ``name`` (id ``obj``) or its cast shadows cover at any of SWEPT_STATES
+    states, dilated; ``truth_render`` gives the truth renderer's output at the view for a state vector."""
+    region = np.zeros(shape, dtype=bool)
     for value in np.linspace(0.0, 1.0, SWEPT_STATES):
         out = truth_render(dict(base, **{name: float(value)}))
         region |= out["ids"] == obj
@@ -88,7 +79,7 @@ def locality(render: RenderFn, truth: Any, frames: Sequence[Frame], camera_of: C
         for name in objects:
             if name not in truth.object_ids:
                 continue
-            region = swept_region(truth, frame, camera, name, base, truth_render)
+            region = swept_region(truth_render, truth.object_ids[name], name, base, (camera.height, camera.width))
             lo, hi = dict(base, **{name: 0.0}), dict(base, **{name: 1.0})
             model = np.abs(np.asarray(model_render(lo), np.float64) - np.asarray(model_render(hi), np.float64))
             t_lo = truth_render(lo)["rgb"]

@@ -138,7 +138,7 @@ def _parse_clause(raw: str, previous_value: float | None, source: str, command: 
         if not verb and (w in OPEN_VERBS or w in CLOSE_VERBS or w in NEUTRAL_VERBS
                          or (i == 0 and w in FIRST_WORD_VERBS)):
             verb = w
-            verb_value = OPEN_VERBS.get(w, CLOSE_VERBS.get(w, FIRST_WORD_VERBS.get(w) if i == 0 else None))
+            verb_value = OPEN_VERBS.get(w, CLOSE_VERBS.get(w, FIRST_WORD_VERBS.get(w)))
             continue
         rest.append(w)
     has_verb = bool(verb)
@@ -151,7 +151,7 @@ def _parse_clause(raw: str, previous_value: float | None, source: str, command: 
     # amounts are read from the raw text (so "0.3" and "30%" survive), after the verb is known
     text = raw
     if has_verb:
-        text = re.sub(rf"\b{verb}\b", " ", raw.lower(), count=1)
+        text = re.sub(rf"\b{verb}\b", " ", raw, count=1)  # split_clauses lower-cased it
     base = verb_value if has_verb else previous_value
     value, text = _amount(text, base, source, command)
     if has_verb and verb_value is None and value is None:
