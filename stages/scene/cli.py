@@ -12,8 +12,10 @@ import argparse
 import json
 import sys
 
+from .atomic_io import write_json
 from .cli_errors import cli_errors
 from .dataset import read_scene
+from .exposure import estimate_exposure
 
 
 def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
@@ -24,6 +26,9 @@ def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
     v.add_argument("--deep", action="store_true", help="also open every image to check its size")
     i = sub.add_parser("info", help="print a JSON summary of a scene dataset")
     i.add_argument("path")
+    e = sub.add_parser("exposure", help="measure how much the frames' exposure varies (per-frame log gains)")
+    e.add_argument("path")
+    e.add_argument("--out", default=None, help="write the estimate (spread, per-frame log gains) to this JSON file")
     return parser
 
 
@@ -38,6 +43,13 @@ def main(argv: list[str] | None = None) -> int:
     ds = read_scene(args.path, validate=True, deep=getattr(args, "deep", False))
     if args.command == "validate":
         print(f"{args.path}: valid scene dataset, {len(ds.frames)} frames, objects {ds.objects}")
+    elif args.command == "exposure":
+        est = estimate_exposure(ds)
+        if args.out:
+            write_json(args.out, est.to_dict())
+        spread = "not measurable (no overlapping neighbours)" if est.spread is None else f"{est.spread:.4f}"
+        print(f"{args.path}: exposure spread {spread} (std of the log gains over {int(est.tied.sum())} frames, "
+              f"{est.pairs} compared pairs)")
     else:
         splits = {s: len(ds.frames_in(s)) for s in ("train", "test")}
         print(json.dumps({"frames": len(ds.frames), "objects": ds.objects, "splits": splits,

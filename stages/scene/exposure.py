@@ -1,0 +1,163 @@
+"""How much a dataset's exposure and white balance vary from frame to frame (docs/model.md, "Exposure").
+
+A phone's auto exposure scales every pixel of a frame by a gain per colour channel. Two neighbouring
+frames of a video see mostly the same surfaces, so after aligning them by dense optical flow (OpenCV's
+DIS) the central log ratio of their colours is the difference of their log gains; surfaces that moved,
+pixels the flow cannot follow (forward-backward check), edges and clipped pixels are left out. A least
+squares fit over the pairs of frames 1, 3 and 9 apart gives every frame's log gain (zero mean), and the
+spread of those gains says whether a per-frame colour correction is worth learning.
+
+On the synthetic captures, whose gains are known: constant exposure reads 0.0006-0.0037, a jitter of 0.04 reads
+0.038 and one of 0.10 reads 0.102 (docs/model.md, "Exposure", has the table).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .dataset import Frame, SceneDataset
+
+OFFSETS = (1, 3, 9)
+"""Frame distances of the pairs that are compared. Each pair's ratio carries a small bias where the scene itself
+changes (an opening door, its shadow); along a chain of neighbours those biases add up, and the longer links
+hold the chain straight (on the `study` capture, of constant exposure, 1/2/3 read 0.0054 and 1/3/9 0.0037)."""
+WINDOW = 0.02
+"""Half-width in log gain of the values the ratio is taken from, around the running estimate: the pixels whose
+colour the gain alone changed agree to about the 8-bit step; a moving object's or shadow's pixels do not, and
+would pull a plain median towards them."""
+MAX_SIDE = 320
+"""Frames are compared at this longest side: a global gain does not need detail, and the flow is ~10x faster
+than at a phone's 960 px."""
+MIN_PIXELS = 500
+"""Fewer usable pixels than this: the pair does not overlap enough to say anything."""
+FB_LIMIT_PX = 0.5
+"""Forward-backward flow disagreement (at the compared size) above which a pixel is not trusted."""
+MIN_CORRELATION = 0.8
+"""Least correlation of the two frames' aligned grey values (blind to a gain): below it the flow matched things
+that are not the same surfaces (frames that do not overlap, an unordered collection)."""
+CLIP = (8, 247)
+"""8-bit values outside this range may be clipped in either frame: their ratio is not the gain's."""
+
+
+@dataclass
+class ExposureEstimate:
+    """Per-frame log gains of a frame sequence and their spread."""
+
+    frame_ids: list[str]
+    """Frames in the order compared (playback order)."""
+    log_gains: np.ndarray
+    """[N, 3] log gain per frame and RGB channel, zero mean over the frames that were tied to a neighbour."""
+    pairs: int
+    """Pairs of frames that overlapped enough to be compared."""
+    tied: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    """[N] whether the frame took part in at least one compared pair."""
+
+    @property
+    def spread(self) -> float | None:
+        """Standard deviation of the tied frames' log gains over frames, averaged over channels; None when
+        fewer than 3 frames are tied (an unordered photo collection, or frames that do not overlap)."""
+        g = self.log_gains[self.tied]
+        return float(g.std(axis=0).mean()) if len(g) >= 3 else None
+
+    def to_dict(self) -> dict:
+        return {"spread": self.spread, "pairs": self.pairs, "frames": len(self.frame_ids),
+                "tied_frames": int(self.tied.sum()), "offsets": list(OFFSETS), "max_side": MAX_SIDE,
+                "log_gains": {f: [round(float(v), 5) for v in g] for f, g in zip(self.frame_ids, self.log_gains,
+                                                                                  strict=True)}}
+
+
+def _small(rgb: np.ndarray) -> np.ndarray:
+    """RGB float [0, 1] -> uint8 at MAX_SIDE (area-averaged)."""
+    img = np.clip(np.asarray(rgb, np.float32) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    s = MAX_SIDE / max(img.shape[:2])
+    if s < 1.0:
+        img = cv2.resize(img, (round(img.shape[1] * s), round(img.shape[0] * s)), interpolation=cv2.INTER_AREA)
+    return img
+
+
+def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow) -> np.ndarray | None:
+    """Median of log(b / a) per channel over the pixels of ``a`` that ``b`` sees ([3]), or None without overlap.
+
+    ``a``, ``b``: uint8 RGB of one size."""
+    ga, gb = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY), cv2.cvtColor(b, cv2.COLOR_RGB2GRAY)
+    fwd = flow.calc(ga, gb, None)
+    bwd = flow.calc(gb, ga, None)
+    h, w = ga.shape
+    xx, yy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    mx, my = xx + fwd[..., 0], yy + fwd[..., 1]
+    b_on_a = cv2.remap(b, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    back = cv2.remap(bwd, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    consistent = np.hypot(fwd[..., 0] + back[..., 0], fwd[..., 1] + back[..., 1]) < FB_LIMIT_PX
+    inside = (mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)
+    # interpolation across an edge mixes two colours: keep the smoother 60 % of the image
+    grad = cv2.magnitude(cv2.Sobel(ga, cv2.CV_32F, 1, 0), cv2.Sobel(ga, cv2.CV_32F, 0, 1))
+    smooth = grad <= np.percentile(grad, 60)
+    lo, hi = CLIP
+    unclipped = (a.min(-1) > lo) & (a.max(-1) < hi) & (b_on_a.min(-1) > lo) & (b_on_a.max(-1) < hi)
+    ok = consistent & inside & smooth & unclipped
+    if int(ok.sum()) < MIN_PIXELS:
+        return None
+    if np.corrcoef(ga[ok].astype(np.float64), cv2.cvtColor(b_on_a, cv2.COLOR_RGB2GRAY)[ok])[0, 1] < MIN_CORRELATION:
+        return None
+    return central_value(np.log(b_on_a[ok].astype(np.float64)) - np.log(a[ok].astype(np.float64)))
+
+
+def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
+    """The centre [3] of the largest cluster of log ratios [P, 3]: the median, then the median of the values within
+    WINDOW of it, repeated (a mode seeker: a door that changes a fifth of the pixels moves the plain median)."""
+    centre = np.median(d, axis=0)
+    for _ in range(iterations):
+        near = (np.abs(d - centre) < WINDOW).all(axis=1)
+        if int(near.sum()) < MIN_PIXELS:
+            break
+        centre = np.median(d[near], axis=0)
+    return centre
+
+
+def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -> ExposureEstimate:
+    """Per-frame log gains of ``images`` (RGB float [0, 1], in playback order; each is shrunk as it comes, so a
+    long phone video is never held at full size)."""
+    small = [_small(im) for im in images]
+    flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    n = len(small)
+    rows, rhs = [], []
+    for s in OFFSETS:
+        for i in range(n - s):
+            if small[i].shape != small[i + s].shape:
+                continue
+            d = pair_log_ratio(small[i], small[i + s], flow)
+            if d is None:
+                continue
+            rows.append((i, i + s))
+            rhs.append(d)
+    tied = np.zeros(n, bool)
+    for i, j in rows:
+        tied[i] = tied[j] = True
+    gains = np.zeros((n, 3))
+    if rows:
+        a = np.zeros((len(rows) + 1, n))
+        for k, (i, j) in enumerate(rows):
+            a[k, i], a[k, j] = -1.0, 1.0
+        a[-1, tied] = 1.0  # the gains' mean is free (the field takes it): fix it at zero
+        y = np.vstack([np.asarray(rhs), np.zeros((1, 3))])
+        gains, *_ = np.linalg.lstsq(a, y, rcond=None)
+        gains[~tied] = 0.0
+    return ExposureEstimate(list(frame_ids), gains, len(rows), tied)
+
+
+def playback_order(ds: SceneDataset) -> list[Frame]:
+    """The dataset's frames in the order they were filmed: by source index when every frame has one, else as
+    listed in transforms.json."""
+    if all(f.source_index is not None for f in ds.frames):
+        return sorted(ds.frames, key=lambda f: f.source_index)
+    return list(ds.frames)
+
+
+def estimate_exposure(ds: SceneDataset) -> ExposureEstimate:
+    """Per-frame log gains of every frame of a dataset, train and test, in playback order."""
+    frames = playback_order(ds)
+    return estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames])

@@ -1,0 +1,66 @@
+"""Per-frame exposure of a frame sequence from its overlapping neighbours (stages/scene/exposure.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from stages.scene.cli import main as scene_main
+from stages.scene.exposure import central_value, estimate_exposure, estimate_log_gains
+from tests.conftest import make_tiny_dataset
+from tests.pan_frames import pan, write_pan_dataset
+
+
+def test_the_gains_of_a_panning_camera_are_recovered():
+    rng = np.random.default_rng(1)
+    truth = rng.normal(0.0, 0.05, (24, 1)) + rng.normal(0.0, 0.02, (24, 3))
+    est = estimate_log_gains(pan(24, truth), [f"{i:05d}" for i in range(24)])
+    truth = truth - truth.mean(axis=0)
+    assert est.tied.all() and est.pairs == 23 + 21 + 15  # frames 1, 3 and 9 apart
+    assert np.abs(est.log_gains - truth).max() < 0.01
+    assert est.spread == pytest.approx(float(truth.std(axis=0).mean()), abs=0.003)
+
+
+def test_constant_exposure_reads_almost_no_spread():
+    est = estimate_log_gains(pan(16, np.zeros((16, 3))), [str(i) for i in range(16)])
+    assert est.spread < 0.002
+
+
+def test_a_changing_part_of_the_scene_does_not_read_as_exposure():
+    """Two fifths of the pixels brightened by an opening door's light: the plain median moves, the centre of the
+    largest cluster stays at the gain the rest of the image shows."""
+    rng = np.random.default_rng(5)
+    d = np.full((5000, 3), 0.03) + rng.normal(0.0, 0.01, (5000, 3))  # the 8-bit step at mid grey, about
+    d[:2000] += rng.uniform(0.05, 0.4, (2000, 1))
+    assert np.abs(np.median(d, axis=0) - 0.03).min() > 0.008
+    np.testing.assert_allclose(central_value(d), 0.03, atol=0.002)
+
+
+def test_frames_that_do_not_overlap_give_no_spread(tmp_path):
+    """Random images (an unordered collection) tie no pair: no number rather than a made-up one."""
+    ds = make_tiny_dataset(tmp_path / "ds", n_frames=6, width=64, height=48)
+    est = estimate_exposure(ds)
+    assert est.pairs == 0 and est.spread is None and not est.log_gains.any()
+
+
+def test_the_dataset_is_read_in_playback_order(tmp_path):
+    """transforms.json may list frames in any order; the source index puts neighbours next to each other."""
+    rng = np.random.default_rng(2)
+    gains = rng.normal(0.0, 0.05, (8, 3))
+    ds = write_pan_dataset(tmp_path / "ds", gains)
+    ds.frames.reverse()
+    est = estimate_exposure(ds)
+    assert est.frame_ids == [f"{i:05d}" for i in range(8)]
+    assert np.abs(est.log_gains - (gains - gains.mean(0))).max() < 0.01
+
+
+def test_the_cli_writes_the_estimate(tmp_path, capsys):
+    gains = np.random.default_rng(3).normal(0.0, 0.05, (8, 3))
+    write_pan_dataset(tmp_path / "ds", gains)
+    assert scene_main(["exposure", str(tmp_path / "ds"), "--out", str(tmp_path / "exposure.json")]) == 0
+    saved = json.loads((tmp_path / "exposure.json").read_text())
+    assert saved["spread"] == pytest.approx(float((gains - gains.mean(0)).std(0).mean()), abs=0.004)
+    assert list(saved["log_gains"]) == [f"{i:05d}" for i in range(8)] and saved["tied_frames"] == 8
+    assert "spread" in capsys.readouterr().out
