@@ -71,11 +71,19 @@ def label_map(ds: SceneDataset, frame: Frame) -> np.ndarray:
     return labels
 
 
+def _nominal(rgb: np.ndarray, log_gain: list[float] | None) -> np.ndarray:
+    """The image at the capture's nominal exposure: its measured gain divided out (no-op without one)."""
+    return rgb if log_gain is None else rgb * np.exp(-np.asarray(log_gain, np.float32))
+
+
 class RayDataset:
     """The rays of a list of frames (one shared image size), on the CPU or the training device."""
 
     def __init__(self, ds: SceneDataset, frames: list[Frame], norm: SceneNormalization, near_plane: float,
-                 device: torch.device | str = "cpu", need_states: bool = True) -> None:
+                 device: torch.device | str = "cpu", need_states: bool = True,
+                 log_gains: dict[str, list[float]] | None = None) -> None:
+        """``log_gains``: a measured per-channel log gain per frame id, divided out of that frame's colours
+        (``model.appearance.mode: measured``); frames it does not name keep theirs."""
         if not frames:
             raise SceneError(ds.root / "transforms.json", "no frames to train on", "give the dataset train frames")
         self.ds, self.frames, self.norm, self.near_plane = ds, frames, norm, near_plane
@@ -96,8 +104,10 @@ class RayDataset:
             raise SceneError(ds.root / "transforms.json", f"frames {bad} have no state for every object",
                              "run `livescene states` to interpolate states, or train with --state-mode learned")
         self.states = torch.tensor(np.nan_to_num(states, nan=0.0), dtype=torch.float32)
+        gains = log_gains or {}
         self.images = torch.from_numpy(np.stack([
-            np.clip(ds.load_image(f) * 255.0 + 0.5, 0, 255).astype(np.uint8) for f in frames]))
+            np.clip(_nominal(ds.load_image(f), gains.get(f.frame_id)) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+            for f in frames]))
         self.labels = torch.from_numpy(np.stack([label_map(ds, f) for f in frames]))
         c2w = np.stack([norm.pose(f.c2w) for f in frames])
         self.rotations = torch.tensor(c2w[:, :3, :3], dtype=torch.float32)

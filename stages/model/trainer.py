@@ -33,6 +33,7 @@ from tqdm import tqdm
 from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
 
 from .allocator import keep_freed_memory
+from .appearance_choice import resolve_appearance
 from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
@@ -181,6 +182,9 @@ class Trainer:
         if not cfg.data:
             raise InputError("--data", "no dataset given", "pass --data DS (a scene dataset folder)")
         self.ds = read_scene(cfg.data)
+        self.appearance = resolve_appearance(cfg.model.appearance, self.ds)
+        if "requested" in self.appearance:
+            print(f"appearance auto: {self.appearance['reason']}: {self.appearance['mode']}", file=sys.stderr)
         mode = cfg.model.state.mode
         if mode not in ("given", "learned"):
             raise InputError("--state-mode", f"unknown state mode {mode!r}", "use given or learned")
@@ -192,7 +196,9 @@ class Trainer:
         near = cfg.model.sampling.near_plane
         # learned-state mode: rays carry no states, so training AND the periodic evaluation use the learned ones
         given = mode == "given"
-        self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=given)
+        # measured gains shape the training colours only: evaluation compares with the images as they are
+        self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=given,
+                                     log_gains=self.appearance.pop("log_gains", None))
         self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=given)
         self.info = scene_info(self.ds, cfg, self.language)
         self.data_digest = data_digest(self._data_tensors())
@@ -591,6 +597,7 @@ class Trainer:
             "peak_memory_kind": "cuda max_memory_allocated" if self.device.type == "cuda" else "process max RSS",
             "objects": list(self.ds.objects),
             "state_mode": cfg.model.state.mode,
+            "appearance": self.appearance,
             "language": bool(self.language),
             "normalization": self.norm.to_dict(),
             "eval_psnr": eval_psnr,

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
 import pytest
 import torch
 
@@ -9,6 +12,8 @@ from stages.model import Trainer, build_model, load_config, load_run
 from stages.model.methods import SceneInfo
 from stages.model.ray_dataset import RayBatch
 from stages.model.rays import RayBundle
+from stages.scene import InputError
+from tests.pan_frames import write_pan_dataset
 
 INFO = SceneInfo(objects=["o0", "o1"], n_frames=6)
 
@@ -78,3 +83,55 @@ def test_renders_use_the_nominal_colour(tiny_dataset, tmp_path, tiny_config):
     with torch.no_grad():
         run.model.appearance.fill_(0.5)
     assert (run.render(tiny_dataset.camera, frame.c2w, frame.state)["rgb"] == before).all()
+
+
+@pytest.mark.parametrize("sigma, chosen", [(0.05, "measured"), (0.0, "none")])
+def test_auto_corrects_the_exposure_only_where_it_varies(tmp_path, tiny_config, sigma, chosen):
+    """``auto`` measures the frames before the model is built; the run records the choice, and a resumed run
+    measures the same and continues (the checkpoint's config holds the resolved mode)."""
+    gains = np.random.default_rng(4).normal(0.0, sigma, (8, 3))
+    ds = write_pan_dataset(tmp_path / "ds", gains)
+    out = tmp_path / "run"
+    Trainer(tiny_config(ds.root, "model.appearance.mode=auto", steps=2), out, device="cpu", progress=False).train()
+    recorded = json.loads((out / "run.json").read_text())["appearance"]
+    assert recorded["requested"] == "auto" and recorded["mode"] == chosen and recorded["tied_frames"] == 8
+    assert recorded["spread"] == pytest.approx(float((gains - gains.mean(0)).std(0).mean()), abs=0.004)
+    assert load_run(out).model.appearance is None  # nothing learned either way
+    assert "log_gains" not in recorded and ("reason" in recorded) and recorded["auto_spread"] == 0.01
+    assert list((out / "checkpoints").glob("step_*.pt"))  # what the resume below continues from
+    Trainer(tiny_config(ds.root, "model.appearance.mode=auto", steps=3), out, device="cpu", progress=False,
+            resume=True).train()
+    assert json.loads((out / "run.json").read_text())["steps"] == 3
+
+
+def test_a_set_mode_is_recorded_without_measuring(trained_run):
+    assert json.loads((trained_run / "run.json").read_text())["appearance"] == {"mode": "none"}
+
+
+def test_measured_gains_are_divided_out_of_the_training_images(tmp_path, tiny_config):
+    """``measured``: nothing is learned; the training colours are those of the capture at one exposure."""
+    gains = np.random.default_rng(6).normal(0.0, 0.08, (8, 3))
+    jittered = write_pan_dataset(tmp_path / "jittered", gains - gains.mean(0))
+    plain = write_pan_dataset(tmp_path / "plain", np.zeros((8, 3)))
+    trainers = {ds.root.name: Trainer(tiny_config(ds.root, "model.appearance.mode=measured", steps=1),
+                                      tmp_path / f"run-{ds.root.name}", device="cpu", progress=False)
+                for ds in (jittered, plain)}
+    a, b = (trainers[n].train_rays.images.int() for n in ("jittered", "plain"))
+    raw = Trainer(tiny_config(jittered.root, steps=1), tmp_path / "raw", device="cpu", progress=False)
+    assert (raw.train_rays.images.int() - b).abs().float().mean() > 5  # the jitter, as trained without a correction
+    assert (a - b).abs().float().mean() < 1.0 and (a - b).abs().max() <= 6
+    trainers["jittered"].train()
+    recorded = json.loads((tmp_path / "run-jittered" / "run.json").read_text())["appearance"]
+    assert recorded["mode"] == "measured" and recorded["tied_frames"] == 8 and "log_gains" not in recorded
+    assert load_run(tmp_path / "run-jittered").model.appearance is None
+
+
+def test_measured_mode_refuses_frames_it_cannot_measure(tiny_dataset, tmp_path, tiny_config):
+    """Random images (no frame overlaps another): ``measured`` names the data and the fix; ``auto`` keeps them."""
+    refused = r"transforms.json: .*cannot be measured.*fix: set model\.appearance\.mode=affine"
+    with pytest.raises(InputError, match=refused):
+        Trainer(tiny_config(tiny_dataset.root, "model.appearance.mode=measured"), tmp_path / "m", device="cpu",
+                progress=False)
+    t = Trainer(tiny_config(tiny_dataset.root, "model.appearance.mode=auto"), tmp_path / "a", device="cpu",
+                progress=False)
+    assert t.appearance["mode"] == "none" and t.appearance["spread"] is None
