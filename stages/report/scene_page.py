@@ -204,6 +204,27 @@ def _ssim_form(sd: SceneData) -> str:
     return "SSIM: " + escape("; ".join(sorted(forms))) + "."
 
 
+APPEARANCE_WORDS = {"affine": "a colour correction learned per training frame",
+                    "measured": "each training image divided by its measured exposure gains",
+                    "none": "the images as they are"}
+
+
+def _exposure_note(sd: SceneData) -> str:
+    """How the runs treated the frames' exposure, when it was not left alone (docs/model.md, "Exposure")."""
+    said: dict[str, list[str]] = defaultdict(list)  # what was done -> methods: said once for all that did it
+    for m in sd.methods:
+        a = (m.run or {}).get("appearance") or {}
+        if a.get("mode", "none") == "none" and "requested" not in a:
+            continue
+        spread = a.get("spread")
+        how = APPEARANCE_WORDS.get(a.get("mode"), str(a.get("mode")))
+        why = f" (auto: {a['reason']})" if a.get("requested") == "auto" and a.get("reason") else (
+            f" (exposure spread {spread:.4f})" if isinstance(spread, (int, float)) else "")
+        said[how + why].append(m.name)
+    parts = [f"{escape(', '.join(names))}: {escape(what)}" for what, names in said.items()]
+    return (" Exposure: " + "; ".join(parts) + "; renders and scores use the nominal colour.") if parts else ""
+
+
 def section_methods(sd: SceneData) -> str:
     rows = []
     flags = scene_trust(sd)
@@ -232,7 +253,7 @@ def section_methods(sd: SceneData) -> str:
             "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
             "not complete is flagged, and its numbers are not results. "
-            + _ssim_form(sd) + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}."
+            + _ssim_form(sd) + _exposure_note(sd) + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}."
                                        for why, names in lpips_missing.items()) + "</p>"
             + _flag_banner(flags)
             + table(["method", "trust", "PSNR dB", "PSNR objects dB", "PSNR static dB", "SSIM", "LPIPS",

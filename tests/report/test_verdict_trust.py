@@ -226,3 +226,27 @@ def test_locality_verdict_reads_lower_as_better():
     assert row.verdict == "LiveScene ahead"  # it leaves the rest of the room alone, the baseline does not
     row = next(r for r in compare({"livescene": theirs, "mk-planes": ours}, {}) if r.metric == "locality_outside")
     assert row.verdict == "LiveScene behind"
+
+
+# -- exposure -----------------------------------------------------------------------------------------------------
+
+
+def test_the_methods_table_says_how_each_run_treated_the_exposure():
+    from types import SimpleNamespace
+
+    from stages.report.scene_page import _exposure_note
+
+    auto = {"mode": "measured", "requested": "auto", "reason": "exposure spread 0.0385 >= 0.01", "spread": 0.0385}
+    sd = SimpleNamespace(methods=[SimpleNamespace(name="livescene", run={"appearance": auto}),
+                                  SimpleNamespace(name="mk-planes", run={"appearance": auto}),
+                                  SimpleNamespace(name="conerf", run={"appearance": {"mode": "affine"}}),
+                                  SimpleNamespace(name="k-planes", run=None)])  # not trained: not named
+    note = _exposure_note(sd)
+    assert "livescene, mk-planes: each training image divided by its measured exposure gains (auto: exposure " \
+           "spread 0.0385 &gt;= 0.01)" in note
+    assert "conerf: a colour correction learned per training frame" in note
+    assert "k-planes" not in note.replace("mk-planes", "")
+    # the reference (nothing asked, nothing done) and runs older than the record say nothing
+    plain = SimpleNamespace(methods=[SimpleNamespace(name="livescene", run={"appearance": {"mode": "none"}}),
+                                     SimpleNamespace(name="conerf", run={})])
+    assert _exposure_note(plain) == ""
