@@ -109,7 +109,7 @@ def train_args(wildcards, input):
     # Without key frames a scene has no per-frame states to give: LiveScene learns them.
     if not carries(wildcards.scene, "key_frames"):
         args.append("--state-mode learned")
-    if config["train"]["appearance"] != "none":
+    if config["train"]["appearance"] != "none":  # the model's default: the reference
         args.append(f"--set model.appearance.mode={config['train']['appearance']}")
     return " ".join(args)
 
