@@ -144,6 +144,9 @@ class Evaluator:
         # (docs/method.md section 6)
         learned = getattr(self.run, "state_mode", "given") == "learned"
         regions = self._mask_source() if self.ds.objects else ""
+        # a run trained on measured exposure gains renders the nominal exposure: score it against each held-out
+        # image at that exposure too (its gains come from the same measurement; docs/model.md, "Exposure")
+        gains = getattr(self.run, "exposure_gains", None) or {}
         for frame in tqdm(frames, desc="held-out views", unit="view"):
             gt = self._image(frame)
             t0 = time.perf_counter()
@@ -155,6 +158,9 @@ class Evaluator:
                    "state": frame.state}
             if regions:
                 rec.update(self._region_psnr(frame, rgb, gt))
+            if frame.frame_id in gains:
+                nominal = np.clip(gt * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
+                rec["psnr_nominal"] = _finite_or_none(psnr(rgb, nominal))
             records.append(rec)
             kept.append((frame, {k: v for k, v in out.items() if k in ("probs", "language")}))
             if out_dir is not None and self.config.save_renders:
@@ -170,6 +176,9 @@ class Evaluator:
             "psnr_objects": summarize([r.get("psnr_objects") for r in records]),
             "psnr_static": summarize([r.get("psnr_static") for r in records]),
             "region_source": regions or "none: the dataset has no masks and no truth capture was given",
+            **({"psnr_nominal": summarize([r.get("psnr_nominal") for r in records]),
+                "psnr_nominal_source": "each held-out image divided by its measured exposure gains (the run's "
+                                       "exposure.json)"} if gains else {}),
             "image_size": [cam.width, cam.height],
             "state_source": "run's learned state at the frame index" if learned
             else "dataset per-frame state" if all(f.state for f in frames)

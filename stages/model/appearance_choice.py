@@ -14,6 +14,10 @@ from stages.scene.exposure import estimate_exposure
 
 from .config import AppearanceConfig
 
+EXPOSURE_FILE = "exposure.json"
+"""In a run folder trained with ``measured`` gains: ``{"spread", "log_gains": {frame id: [r, g, b]}}`` of every
+frame the measurement tied, held-out frames included (the evaluation scores those at the nominal exposure too)."""
+
 
 def resolve_appearance(config: AppearanceConfig, ds: SceneDataset) -> dict[str, Any]:
     """Replace ``auto`` in ``config.mode`` by the mode the data call for; what was done and why (run.json), and

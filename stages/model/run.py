@@ -14,6 +14,7 @@ the run was trained with language targets.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ import torch.nn.functional as F
 from stages.scene import Camera, InputError, generate_rays, read_yaml_mapping
 
 from .allocator import keep_freed_memory
+from .appearance_choice import EXPOSURE_FILE
 from .chunk_threads import map_chunks
 from .config import RunConfig, config_from_dict
 from .methods import SceneInfo, build_model
@@ -69,6 +71,13 @@ class LoadedRun:
     @property
     def state_mode(self) -> str:
         return self.config.model.state.mode
+
+    @property
+    def exposure_gains(self) -> dict[str, list[float]] | None:
+        """Every frame's measured log gains per channel when the run was trained on them (``exposure.json``),
+        else None: the images were taken as they are."""
+        path = self.run_dir / EXPOSURE_FILE
+        return json.loads(path.read_text())["log_gains"] if path.is_file() else None
 
     def frame_time(self, frame_index: int) -> float:
         n = self.info.n_frames

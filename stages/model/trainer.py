@@ -6,6 +6,7 @@ Every method of the registry trains here. A run folder holds::
     checkpoints/step_*.pt    model, optimiser, scheduler, every RNG state, wall time so far, config, data digest
     train_log.csv            wall_s, step, lr, loss, each term, eval_psnr and eval_miou (periodic), rays_per_s
     model.pt                 final weights + what load_run needs (written last)
+    exposure.json            with ``model.appearance.mode: measured``: every frame's measured log gains
     run.json                 method, parameters, peak memory, train seconds, steps, device, objects, normalisation
 
 Resuming restores the RNG states of torch, numpy, Python and both samplers'
@@ -33,7 +34,7 @@ from tqdm import tqdm
 from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
 
 from .allocator import keep_freed_memory
-from .appearance_choice import resolve_appearance
+from .appearance_choice import EXPOSURE_FILE, resolve_appearance
 from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
@@ -196,9 +197,11 @@ class Trainer:
         near = cfg.model.sampling.near_plane
         # learned-state mode: rays carry no states, so training AND the periodic evaluation use the learned ones
         given = mode == "given"
-        # measured gains shape the training colours only: evaluation compares with the images as they are
+        # measured gains shape the training colours; the evaluation reads them from exposure.json for a held-out
+        # PSNR at the nominal exposure, beside the one against the images as they are
+        self.log_gains: dict[str, list[float]] | None = self.appearance.pop("log_gains", None)
         self.train_rays = RayDataset(self.ds, train_frames, self.norm, near, self.device, need_states=given,
-                                     log_gains=self.appearance.pop("log_gains", None))
+                                     log_gains=self.log_gains)
         self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=given)
         self.info = scene_info(self.ds, cfg, self.language)
         self.data_digest = data_digest(self._data_tensors())
@@ -582,6 +585,8 @@ class Trainer:
         }
         with atomic_path(self.out / "model.pt", suffix=".pt") as tmp:
             torch.save(payload, tmp)
+        if self.log_gains is not None:
+            write_json(self.out / EXPOSURE_FILE, {"spread": self.appearance.get("spread"), "log_gains": self.log_gains})
         run = {
             "method": cfg.method,
             "preset": cfg.preset,

@@ -29,7 +29,8 @@ def _finite(value: Any) -> float | None:
 
 def held_out_items(metrics: dict | None, key: str = "psnr") -> Items:
     """Held-out PSNR per view, keyed by frame id; ``key`` "psnr_objects" / "psnr_static" takes the PSNR over
-    object pixels / the other pixels (evaluations before EVALUATE_VERSION 3 have neither: no items)."""
+    object pixels / the other pixels (evaluations before EVALUATE_VERSION 3 have neither: no items),
+    "psnr_nominal" the PSNR at the nominal exposure (runs trained on measured gains only)."""
     out: Items = {}
     for v in ((metrics or {}).get("held_out") or {}).get("views") or []:
         value = _finite(v.get(key))
@@ -98,6 +99,8 @@ class MetricSpec:
     unit: str
     items: Callable[[dict | None], Items]
     higher_is_better: bool = True
+    only_when_present: bool = False
+    """Left out of the comparison when neither method has items (a metric only some evaluations compute)."""
 
 
 METRICS = [
@@ -107,6 +110,9 @@ METRICS = [
                lambda m: held_out_items(m, "psnr_objects")),
     MetricSpec("held_out_psnr_static", "held-out PSNR per view, static pixels (no object)", "dB",
                lambda m: held_out_items(m, "psnr_static")),
+    # runs trained on measured exposure gains: the held-out images at the nominal exposure the renders show
+    MetricSpec("held_out_psnr_nominal", "held-out PSNR per view at the nominal exposure (images divided by their "
+               "measured gains)", "dB", lambda m: held_out_items(m, "psnr_nominal"), only_when_present=True),
     MetricSpec("unseen_psnr", "unseen-combination PSNR per (view, state vector)", "dB", unseen_items),
     MetricSpec("grounding_iou", "grounding IoU (probs) per (query, view)", "", grounding_items),
     MetricSpec("locality_outside", "change outside the moved object's swept region per (view, object), lower "
@@ -184,6 +190,8 @@ def compare(metrics: dict[str, dict | None], flags: dict[str, str]) -> list[Pair
         on_flagged = {m: flags[m] for m in (LIVESCENE, baseline) if flags.get(m)}
         for spec in METRICS:
             a, b = spec.items(ours), spec.items(theirs)
+            if spec.only_when_present and not a and not b:
+                continue
             note = ""
             positional = any(k[-1].startswith("#") for k in (*a, *b)) if spec.key == "grounding_iou" else False
             if positional and not _same_views(ours, theirs):

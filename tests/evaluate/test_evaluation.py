@@ -312,3 +312,21 @@ def test_a_turned_copy_of_a_truth_world_dataset_is_aligned_by_its_turn(eval_scen
     assert truth.after_turn({}) is truth
     other = TruthSource(renderer=truth.renderer, camera=truth.camera, object_ids={}, same_world=False)
     assert other.after_turn(meta) is other  # estimated poses: aligned by pose_error.json, not by the turn
+
+
+def test_a_run_trained_on_measured_gains_is_also_scored_at_the_nominal_exposure(eval_scene, tmp_path):
+    """The held-out image divided by its measured gains is what such a run renders; views the measurement did
+    not tie keep the plain PSNR only, and a run without gains gets no nominal entry at all (bytes unchanged)."""
+    ds, run, truth = eval_scene
+    plain = evaluate_run(run, ds, tmp_path / "plain", truth, None, EvaluateConfig(unseen_views=0, locality_views=0))
+    assert "psnr_nominal" not in plain["held_out"]
+    assert all("psnr_nominal" not in v for v in plain["held_out"]["views"])
+    run.exposure_gains = {"00000": [0.0, 0.0, 0.0], "00002": [0.2, 0.2, 0.2]}  # frame 00002 filmed 22 % brighter
+    config = EvaluateConfig(unseen_views=0, locality_views=0)
+    held = evaluate_run(run, ds, tmp_path / "gains", truth, None, config)["held_out"]
+    views = {v["frame"]: v for v in held["views"]}
+    assert views["00000"]["psnr_nominal"] == pytest.approx(views["00000"]["psnr"], abs=1e-9)
+    # the fake run renders the stored image: against that image divided by 1.22 it is further off
+    assert views["00002"]["psnr_nominal"] < views["00002"]["psnr"] - 2
+    assert "psnr_nominal" not in views["00004"] and held["psnr_nominal"]["n"] == 2
+    assert "exposure.json" in held["psnr_nominal_source"]

@@ -97,6 +97,7 @@ def test_auto_corrects_the_exposure_only_where_it_varies(tmp_path, tiny_config, 
     assert recorded["requested"] == "auto" and recorded["mode"] == chosen and recorded["tied_frames"] == 8
     assert recorded["spread"] == pytest.approx(float((gains - gains.mean(0)).std(0).mean()), abs=0.004)
     assert load_run(out).model.appearance is None  # nothing learned either way
+    assert (load_run(out).exposure_gains is not None) == (chosen == "measured")
     assert "log_gains" not in recorded and ("reason" in recorded) and recorded["auto_spread"] == 0.01
     assert list((out / "checkpoints").glob("step_*.pt"))  # what the resume below continues from
     Trainer(tiny_config(ds.root, "model.appearance.mode=auto", steps=3), out, device="cpu", progress=False,
@@ -123,7 +124,12 @@ def test_measured_gains_are_divided_out_of_the_training_images(tmp_path, tiny_co
     trainers["jittered"].train()
     recorded = json.loads((tmp_path / "run-jittered" / "run.json").read_text())["appearance"]
     assert recorded["mode"] == "measured" and recorded["tied_frames"] == 8 and "log_gains" not in recorded
-    assert load_run(tmp_path / "run-jittered").model.appearance is None
+    loaded = load_run(tmp_path / "run-jittered")
+    assert loaded.model.appearance is None
+    # every frame's gains, held-out ones too, for the evaluation's PSNR at the nominal exposure
+    assert sorted(loaded.exposure_gains) == sorted(f.frame_id for f in jittered.frames)
+    np.testing.assert_allclose([loaded.exposure_gains[f.frame_id] for f in jittered.frames], gains - gains.mean(0),
+                               atol=0.01)
 
 
 def test_measured_mode_refuses_frames_it_cannot_measure(tiny_dataset, tmp_path, tiny_config):

@@ -250,3 +250,14 @@ def test_the_methods_table_says_how_each_run_treated_the_exposure():
     plain = SimpleNamespace(methods=[SimpleNamespace(name="livescene", run={"appearance": {"mode": "none"}}),
                                      SimpleNamespace(name="conerf", run={})])
     assert _exposure_note(plain) == ""
+
+
+def test_the_nominal_exposure_row_appears_only_for_runs_that_measured_their_gains():
+    plain = {"livescene": _metrics({"a": 25.0, "b": 26.0}), "mk-planes": _metrics({"a": 24.0, "b": 25.5})}
+    assert "held_out_psnr_nominal" not in {r.metric for r in compare(plain, {})}
+    measured = {m: json.loads(json.dumps(v)) for m, v in plain.items()}
+    for m, values in (("livescene", (26.0, 27.0)), ("mk-planes", (25.0, 26.0))):
+        for view, value in zip(measured[m]["held_out"]["views"], values, strict=True):
+            view["psnr_nominal"] = value
+    row = next(r for r in compare(measured, {}) if r.metric == "held_out_psnr_nominal")
+    assert row.n == 2 and row.mean == pytest.approx(1.0) and "nominal exposure" in row.label
