@@ -37,7 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     summary = ingest_labels(config)
     print(f"{args.out}: {summary['n_labelled']}/{summary['n_frames']} frames labelled ({summary['format']}), "
           f"objects {summary['objects']}, {len(summary['frames_without_masks'])} without masks, "
-          f"{len(summary['unreliable_frames'])} unreliable (object under H*W/300 pixels)")
+          f"{len(summary['unreliable_frames'])} unreliable (object under H*W/300 pixels and a quarter of its "
+          "median size)")
     if "propagation" in summary:
         prop = summary["propagation"]
         loo = prop["leave_one_out_mean_iou"]

@@ -6,7 +6,8 @@ Output (written atomically into ``out``)::
     mapping.yaml      {1: name, 2: name, ...} in canonical object order
     labels.json       coverage per object per frame, frames without masks,
                       unreliable frames (an object present on fewer than
-                      H*W/300 pixels: its mask is too small to trust)
+                      H*W/300 pixels and under a quarter of its usual size:
+                      its mask is too small to trust)
 
 When the annotations cover only some frames, the others are filled by optical-flow
 propagation (``missing_masks="propagate"``, the default; stages/labels/propagate_masks.py adds
@@ -25,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from stages.scene import atomic_dir, label_map_to_onehot, write_json, write_mask, write_yaml
+from stages.scene.masks import UNRELIABLE_DIVISOR, USUAL_QUANTILE, USUAL_SHARE, unreliable_masks
 
 from .coco_labels import read_coco_labels
 from .errors import LabelError
@@ -39,8 +41,6 @@ from .resize import resize_labels
 
 LabelFormat = Literal["auto", "npy", "png", "coco", "labelme"]
 MissingMasks = Literal["propagate", "leave", "refuse"]
-UNRELIABLE_DIVISOR = 300
-"""An object on fewer than H*W/300 pixels of a frame makes that frame's mask unreliable (docs/method.md section 5)."""
 
 
 @dataclass
@@ -170,7 +170,6 @@ def ingest_labels(config: LabelsConfig) -> dict:
     h, w = frames.height, frames.width
     min_pixels = h * w / UNRELIABLE_DIVISOR
     per_frame: dict[str, dict] = {}
-    unreliable: dict[str, list[str]] = {}
     overlaps: dict[str, int] = {}
     src_sizes: set[tuple[int, int]] = set()
     annotated: dict[str, np.ndarray] = {}
@@ -179,9 +178,15 @@ def ingest_labels(config: LabelsConfig) -> dict:
         pixels = np.bincount(labels.ravel(), minlength=len(names) + 1)[1:]
         per_frame[fid] = {"pixels": {n: int(p) for n, p in zip(names, pixels, strict=True)},
                           "coverage": {n: round(float(p) / (h * w), 6) for n, p in zip(names, pixels, strict=True)}}
-        small = [n for n, p in zip(names, pixels, strict=True) if 0 < p < min_pixels]
-        if small:
-            unreliable[fid] = small
+
+    def unreliable() -> dict[str, list[str]]:
+        """Frames (playback order) -> objects whose mask there is too small to trust (``unreliable_masks``)."""
+        ids = [f for f in frames.frame_ids if f in per_frame]
+        if not ids:
+            return {}
+        small = unreliable_masks(np.array([[per_frame[f]["pixels"][n] for n in names] for f in ids]), h, w)
+        return {f: [n for n, s in zip(names, row, strict=True) if s] for f, row in zip(ids, small, strict=True)
+                if row.any()}
 
     with atomic_dir(config.out) as tmp:
         order = [f for f in frames.frame_ids if f in matched]
@@ -209,9 +214,11 @@ def ingest_labels(config: LabelsConfig) -> dict:
             "n_frames": len(frames.frame_ids),
             "n_labelled": len(order),
             "min_reliable_pixels": min_pixels,
-            "unreliable_rule": f"an object present on fewer than H*W/{UNRELIABLE_DIVISOR} pixels",
+            "unreliable_rule": f"an object present on fewer than H*W/{UNRELIABLE_DIVISOR} pixels and fewer than "
+                               f"{USUAL_SHARE} of its usual size (the {USUAL_QUANTILE} quantile of its pixel counts "
+                               "where visible)",
             "frames_without_masks": missing,
-            "unreliable_frames": unreliable,
+            "unreliable_frames": unreliable(),
             "overlap_pixels": overlaps,
             "labels_without_frame": unmatched,
             "frames": per_frame,
@@ -232,7 +239,7 @@ def ingest_labels(config: LabelsConfig) -> dict:
                                 "mean_confidence": result.report["mean_confidence"],
                                 "leave_one_out_mean_iou": loo.get("mean_iou_all"),
                                 "leave_one_out_n": loo.get("n", 0)},
-                "unreliable_frames": {f: unreliable[f] for f in frames.frame_ids if f in unreliable},
+                "unreliable_frames": unreliable(),
                 "frames": {f: per_frame[f] for f in frames.frame_ids},
             })
             write_json(tmp / "propagation.json", result.report)

@@ -16,12 +16,10 @@ import torch
 
 from stages.scene import Frame, SceneDataset, SceneError
 from stages.scene.camera import pixel_directions
+from stages.scene.masks import unreliable_masks
 
 from .rays import RayBundle
 from .scene_normalization import SceneNormalization, aabb_near_far
-
-UNRELIABLE_FRACTION = 1.0 / 300.0
-"""A mask whose object covers fewer than H*W/300 pixels (but some) makes the frame's labels unreliable."""
 
 
 @dataclass
@@ -51,24 +49,40 @@ def state_vector(ds: SceneDataset, frame: Frame) -> np.ndarray:
     return out
 
 
-def label_map(ds: SceneDataset, frame: Frame) -> np.ndarray:
-    """int8 label map of a frame; all -1 when it has no mask or its mask is unreliable."""
-    cam = ds.camera_of(frame)
-    if not ds.has_masks or ds.n_objects == 0:
-        return np.full((cam.height, cam.width), -1, dtype=np.int8)
+def _mask_or_none(ds: SceneDataset, frame: Frame) -> np.ndarray | None:
+    """The frame's one-hot mask, or None where the dataset says it has none."""
     try:
-        mask = ds.load_mask(frame)
+        return ds.load_mask(frame)
     except SceneError:
         if frame.frame_id in set(map(str, ds.meta.get("frames_without_masks", []))):
-            return np.full((cam.height, cam.width), -1, dtype=np.int8)
+            return None
         raise
-    counts = mask[..., :-1].reshape(-1, ds.n_objects).sum(0)
-    threshold = cam.height * cam.width * UNRELIABLE_FRACTION
-    if ((counts > 0) & (counts < threshold)).any():
-        return np.full((cam.height, cam.width), -1, dtype=np.int8)
-    labels = np.argmax(mask, axis=-1).astype(np.int8)
-    labels[~mask.any(axis=-1)] = -1
-    return labels
+
+
+def label_maps(ds: SceneDataset, frames: list[Frame]) -> np.ndarray:
+    """int8 label maps [F, H, W] of ``frames``: object index, alpha = background, -1 = no label; a frame without
+    a mask, or with an object's mask too small to trust (``unreliable_masks`` over the dataset's frames), is all -1.
+    """
+    cam = ds.camera_of(frames[0])
+    out = np.full((len(frames), cam.height, cam.width), -1, dtype=np.int8)
+    if not ds.has_masks or ds.n_objects == 0:
+        return out
+    counts = {}
+    for f in ds.frames:  # the objects' usual sizes come from every frame, as the labels stage counts them
+        mask = _mask_or_none(ds, f)
+        if mask is not None:
+            counts[f.frame_id] = mask[..., :-1].reshape(-1, ds.n_objects).sum(0)
+    ids = list(counts)
+    small = unreliable_masks(np.array([counts[i] for i in ids]), cam.height, cam.width) if ids else None
+    unreliable = {i for i, row in zip(ids, small if small is not None else [], strict=True) if row.any()}
+    for k, f in enumerate(frames):
+        if f.frame_id not in counts or f.frame_id in unreliable:
+            continue
+        mask = ds.load_mask(f)
+        labels = np.argmax(mask, axis=-1).astype(np.int8)
+        labels[~mask.any(axis=-1)] = -1
+        out[k] = labels
+    return out
 
 
 def _nominal(rgb: np.ndarray, log_gain: list[float] | None) -> np.ndarray:
@@ -108,7 +122,7 @@ class RayDataset:
         self.images = torch.from_numpy(np.stack([
             np.clip(_nominal(ds.load_image(f), gains.get(f.frame_id)) * 255.0 + 0.5, 0, 255).astype(np.uint8)
             for f in frames]))
-        self.labels = torch.from_numpy(np.stack([label_map(ds, f) for f in frames]))
+        self.labels = torch.from_numpy(label_maps(ds, frames))
         c2w = np.stack([norm.pose(f.c2w) for f in frames])
         self.rotations = torch.tensor(c2w[:, :3, :3], dtype=torch.float32)
         self.centres = torch.tensor(c2w[:, :3, 3], dtype=torch.float32)

@@ -52,7 +52,7 @@ def section_labels(sd: SceneData, skipped: str = "the labels rule did not run fo
     n_frames, n_labelled = labels.get("n_frames", 0), labels.get("n_labelled", 0)
     head = (f"<p>{n_labelled} of {n_frames} frames annotated ({escape(str(labels.get('format', '?')))}, objects "
             f"{escape(', '.join(objects))}); {len(labels.get('unreliable_frames') or {})} frames with an object under "
-            f"H*W/300 pixels (their mask loss is skipped).</p>")
+            f"H*W/300 pixels and a quarter of its median size (their mask loss is skipped).</p>")
     report = read_json(folder / "propagation.json")
     if report is None:
         without = labels.get("frames_without_masks") or []
