@@ -121,19 +121,26 @@ def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
 def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -> ExposureEstimate:
     """Per-frame log gains of ``images`` (RGB float [0, 1], in playback order; each is shrunk as it comes, so a
     long phone video is never held at full size)."""
-    small = [_small(im) for im in images]
-    flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-    n = len(small)
-    rows, rhs = [], []
-    for s in OFFSETS:
-        for i in range(n - s):
-            if small[i].shape != small[i + s].shape:
-                continue
-            d = pair_log_ratio(small[i], small[i + s], flow)
-            if d is None:
-                continue
-            rows.append((i, i + s))
-            rhs.append(d)
+    # one OpenCV thread: with several, DIS flow on a busy machine splits its work differently and a gain moves
+    # in the 8th digit, which rounds some training pixels the other way (laundry: two runs, two data digests)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        small = [_small(im) for im in images]
+        flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+        n = len(small)
+        rows, rhs = [], []
+        for s in OFFSETS:
+            for i in range(n - s):
+                if small[i].shape != small[i + s].shape:
+                    continue
+                d = pair_log_ratio(small[i], small[i + s], flow)
+                if d is None:
+                    continue
+                rows.append((i, i + s))
+                rhs.append(d)
+    finally:
+        cv2.setNumThreads(threads)
     tied = np.zeros(n, bool)
     for i, j in rows:
         tied[i] = tied[j] = True

@@ -64,3 +64,29 @@ def test_the_cli_writes_the_estimate(tmp_path, capsys):
     assert saved["spread"] == pytest.approx(float((gains - gains.mean(0)).std(0).mean()), abs=0.004)
     assert list(saved["log_gains"]) == [f"{i:05d}" for i in range(8)] and saved["tied_frames"] == 8
     assert "spread" in capsys.readouterr().out
+
+
+def test_the_flow_runs_on_one_opencv_thread_and_the_setting_is_restored(monkeypatch):
+    """Several OpenCV threads make DIS flow depend on the machine's load (a gain moved in the 8th digit between
+    two runs): the measurement must give the same gains, and so the same training images, every time."""
+    import cv2
+
+    seen = []
+    create = cv2.DISOpticalFlow_create
+
+    class Recording:
+        def __init__(self, preset):
+            self.flow = create(preset)
+
+        def calc(self, a, b, init):
+            seen.append(cv2.getNumThreads())
+            return self.flow.calc(a, b, init)
+
+    monkeypatch.setattr(cv2, "DISOpticalFlow_create", Recording)
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(2)
+    try:
+        estimate_log_gains(pan(6, np.zeros((6, 3))), [str(i) for i in range(6)])
+        assert seen and set(seen) == {1} and cv2.getNumThreads() == 2
+    finally:
+        cv2.setNumThreads(before)
