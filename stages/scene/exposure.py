@@ -36,6 +36,8 @@ MIN_PIXELS = 500
 """Fewer usable pixels than this: the pair does not overlap enough to say anything."""
 FB_LIMIT_PX = 0.5
 """Forward-backward flow disagreement (at the compared size) above which a pixel is not trusted."""
+GAIN_STEP = 1e-4
+"""Grid of the log gains returned (a 0.01 % brightness step, under a tenth of the 8-bit step)."""
 MIN_CORRELATION = 0.8
 """Least correlation of the two frames' aligned grey values (blind to a gain): below it the flow matched things
 that are not the same surfaces (frames that do not overlap, an unordered collection)."""
@@ -121,8 +123,7 @@ def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
 def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -> ExposureEstimate:
     """Per-frame log gains of ``images`` (RGB float [0, 1], in playback order; each is shrunk as it comes, so a
     long phone video is never held at full size)."""
-    # one OpenCV thread: with several, DIS flow on a busy machine splits its work differently and a gain moves
-    # in the 8th digit, which rounds some training pixels the other way (laundry: two runs, two data digests)
+    # one OpenCV thread: with several, DIS flow on a busy machine may split its work differently
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -153,6 +154,9 @@ def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -
         y = np.vstack([np.asarray(rhs), np.zeros((1, 3))])
         gains, *_ = np.linalg.lstsq(a, y, rcond=None)
         gains[~tied] = 0.0
+        # on a grid far finer than the estimate's accuracy (~3e-3): the gains of two runs differ in their last
+        # digits (docs/model.md, "Exposure": not bit-reproducible), and the grid makes most of them equal
+        gains = np.round(gains / GAIN_STEP) * GAIN_STEP
     return ExposureEstimate(list(frame_ids), gains, len(rows), tied)
 
 

@@ -90,3 +90,11 @@ def test_the_flow_runs_on_one_opencv_thread_and_the_setting_is_restored(monkeypa
         assert seen and set(seen) == {1} and cv2.getNumThreads() == 2
     finally:
         cv2.setNumThreads(before)
+
+
+def test_the_gains_lie_on_a_fixed_grid():
+    """Gains that differ in their last bits between two runs would round some training pixels the other way."""
+    rng = np.random.default_rng(7)
+    est = estimate_log_gains(pan(8, rng.normal(0.0, 0.05, (8, 3))), [str(i) for i in range(8)])
+    steps = est.log_gains / 1e-4
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
