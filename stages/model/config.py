@@ -214,9 +214,9 @@ class AppearanceConfig:
     colour in the photometric loss (a phone's auto exposure and white balance), zero at the start and
     L2-penalised; renders and evaluation use none (the nominal colour). ``measured``: nothing is learned; each
     training image is divided by its gains as measured from its overlapping neighbours (``stages.scene.exposure``).
-    ``none``: the reference. ``auto``:
-    ``affine`` when the dataset's frames vary in exposure by at least ``auto_spread``, else ``none``; the
-    run records the choice and the measured spread (``stages.model.appearance_choice``)."""
+    ``none``: the reference. ``auto``: ``measured`` when the dataset's frames vary in exposure by at least
+    ``auto_spread``, else ``none``; the run records the choice and the measured spread
+    (``stages.model.appearance_choice``)."""
     auto_spread: float = 0.01
     """``auto``: the least spread of the frames' log gains (std over frames; ``stages.scene.exposure``) that turns
     the correction on. Constant exposure reads 0.0015 on the synthetic captures; docs/model.md has the

@@ -67,21 +67,24 @@ def label_maps(ds: SceneDataset, frames: list[Frame]) -> np.ndarray:
     out = np.full((len(frames), cam.height, cam.width), -1, dtype=np.int8)
     if not ds.has_masks or ds.n_objects == 0:
         return out
-    counts = {}
-    for f in ds.frames:  # the objects' usual sizes come from every frame, as the labels stage counts them
+    # one read of every mask: the objects' usual sizes come from every frame (as the labels stage counts them),
+    # the label maps from the requested ones
+    index = {id(f): k for k, f in enumerate(frames)}
+    ids, counts = [], []
+    for f in ds.frames:
         mask = _mask_or_none(ds, f)
-        if mask is not None:
-            counts[f.frame_id] = mask[..., :-1].reshape(-1, ds.n_objects).sum(0)
-    ids = list(counts)
-    small = unreliable_masks(np.array([counts[i] for i in ids]), cam.height, cam.width) if ids else None
-    unreliable = {i for i, row in zip(ids, small if small is not None else [], strict=True) if row.any()}
-    for k, f in enumerate(frames):
-        if f.frame_id not in counts or f.frame_id in unreliable:
+        if mask is None:
             continue
-        mask = ds.load_mask(f)
-        labels = np.argmax(mask, axis=-1).astype(np.int8)
-        labels[~mask.any(axis=-1)] = -1
-        out[k] = labels
+        ids.append(f.frame_id)
+        counts.append(mask[..., :-1].reshape(-1, ds.n_objects).sum(0))
+        if id(f) in index:
+            labels = out[index[id(f)]]
+            labels[:] = np.argmax(mask, axis=-1)
+            labels[~mask.any(axis=-1)] = -1
+    if ids:
+        unreliable = {i for i, small in zip(ids, unreliable_masks(np.array(counts), cam.height, cam.width),
+                                            strict=True) if small.any()}
+        out[[k for k, f in enumerate(frames) if f.frame_id in unreliable]] = -1
     return out
 
 
