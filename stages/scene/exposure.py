@@ -96,7 +96,7 @@ def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow) -> np
     consistent = np.hypot(fwd[..., 0] + back[..., 0], fwd[..., 1] + back[..., 1]) < FB_LIMIT_PX
     inside = (mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)
     # interpolation across an edge mixes two colours: keep the smoother 60 % of the image
-    grad = cv2.magnitude(cv2.Sobel(ga, cv2.CV_32F, 1, 0), cv2.Sobel(ga, cv2.CV_32F, 0, 1))
+    grad = edge_strength(ga)
     smooth = grad <= np.percentile(grad, 60)
     lo, hi = CLIP
     unclipped = (a.min(-1) > lo) & (a.max(-1) < hi) & (b_on_a.min(-1) > lo) & (b_on_a.max(-1) < hi)
@@ -106,6 +106,19 @@ def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow) -> np
     if np.corrcoef(ga[ok].astype(np.float64), cv2.cvtColor(b_on_a, cv2.COLOR_RGB2GRAY)[ok])[0, 1] < MIN_CORRELATION:
         return None
     return central_value(np.log(b_on_a[ok].astype(np.float64)) - np.log(a[ok].astype(np.float64)))
+
+
+def edge_strength(grey: np.ndarray) -> np.ndarray:
+    """Squared Sobel gradient magnitude [H, W] of a uint8 image, in exact integers.
+
+    Not ``cv2.magnitude`` of float gradients: it approximates the square root (250 comes out as 250.0000153), and
+    differently in its vector and scalar code, and which code a pixel takes depends on where the allocator put the
+    array; so two runs could put a few different pixels under the percentile and read a gain that differs in its
+    last digits (docs/model.md, "Exposure"). Squaring is monotonic: the same pixels fall under a percentile of it
+    as under one of the exact magnitude."""
+    gx = cv2.Sobel(grey, cv2.CV_16S, 1, 0).astype(np.int32)
+    gy = cv2.Sobel(grey, cv2.CV_16S, 0, 1).astype(np.int32)
+    return gx * gx + gy * gy
 
 
 def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
@@ -123,25 +136,19 @@ def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
 def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -> ExposureEstimate:
     """Per-frame log gains of ``images`` (RGB float [0, 1], in playback order; each is shrunk as it comes, so a
     long phone video is never held at full size)."""
-    # one OpenCV thread: with several, DIS flow on a busy machine may split its work differently
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        small = [_small(im) for im in images]
-        flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-        n = len(small)
-        rows, rhs = [], []
-        for s in OFFSETS:
-            for i in range(n - s):
-                if small[i].shape != small[i + s].shape:
-                    continue
-                d = pair_log_ratio(small[i], small[i + s], flow)
-                if d is None:
-                    continue
-                rows.append((i, i + s))
-                rhs.append(d)
-    finally:
-        cv2.setNumThreads(threads)
+    small = [_small(im) for im in images]
+    flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    n = len(small)
+    rows, rhs = [], []
+    for s in OFFSETS:
+        for i in range(n - s):
+            if small[i].shape != small[i + s].shape:
+                continue
+            d = pair_log_ratio(small[i], small[i + s], flow)
+            if d is None:
+                continue
+            rows.append((i, i + s))
+            rhs.append(d)
     tied = np.zeros(n, bool)
     for i, j in rows:
         tied[i] = tied[j] = True
@@ -154,8 +161,8 @@ def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -
         y = np.vstack([np.asarray(rhs), np.zeros((1, 3))])
         gains, *_ = np.linalg.lstsq(a, y, rcond=None)
         gains[~tied] = 0.0
-        # on a grid far finer than the estimate's accuracy (~3e-3): the gains of two runs differ in their last
-        # digits (docs/model.md, "Exposure": not bit-reproducible), and the grid makes most of them equal
+        # on a grid far finer than the estimate's accuracy (~3e-3): another machine's LAPACK may differ in the
+        # least-squares fit's last bits, which would round some training pixels the other way
         gains = np.round(gains / GAIN_STEP) * GAIN_STEP
     return ExposureEstimate(list(frame_ids), gains, len(rows), tied)
 
