@@ -222,8 +222,12 @@ def test_poses_orient_false_keeps_every_world(workflow_copy, tmp_path):
 
 
 def test_appearance_correction_reaches_every_training(workflow_copy):
-    """none by default (the reference's images, bit-reproducible); every other mode reaches every training."""
+    """auto by default (measured gains divided out where they vary); every mode reaches every training, and none
+    leaves the model at its own default, the reference's images."""
     jobs = workflow_copy.dry_run().scene_jobs("demo")["train"]
+    assert len(jobs) == 3 and all("--set model.appearance.mode=auto" in t for t in jobs)
+    chosen = workflow_copy.write_config(train={"appearance": "none"})
+    jobs = workflow_copy.dry_run("--configfile", str(chosen)).scene_jobs("demo")["train"]
     assert len(jobs) == 3 and not any("appearance" in t for t in jobs)
     for mode in ("affine", "measured", "auto"):
         chosen = workflow_copy.write_config(train={"appearance": mode})
