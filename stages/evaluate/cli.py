@@ -34,6 +34,10 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     p.add_argument("--levels", default="0,0.5,1", help="levels of the unseen-combination test")
     p.add_argument("--locality-views", type=int, default=8,
                    help="held-out poses of the locality test (needs --truth; 0 = skip)")
+    p.add_argument("--max-unseen-renders", type=int, default=48,
+                   help="most unseen-combination renders: fewer poses for a room of many objects (0 = no cap)")
+    p.add_argument("--max-locality-pairs", type=int, default=40,
+                   help="most (pose, object) pairs of the locality test: fewer poses for many objects (0 = no cap)")
     p.add_argument("--novelty-min", type=float, default=0.25,
                    help="least L-inf distance to training states for a combination to count as unseen")
     p.add_argument("--grounding-threshold", type=float, default=0.5, help="relevancy threshold of the grounding IoU")
@@ -62,6 +66,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     from .evaluation import EvaluateConfig, evaluate_run
     from .truth_source import TruthSource
 
+    for flag in ("max_unseen_renders", "max_locality_pairs"):
+        if getattr(args, flag) < 0:
+            raise InputError(f"--{flag.replace('_', '-')}", f"{getattr(args, flag)} is negative",
+                             "pass a number of renders, or 0 for no cap")
     data = dataset_of_run(args.run, args.data)
     try:
         levels = tuple(float(v) for v in args.levels.split(",") if v.strip())
@@ -83,7 +91,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     cfg = EvaluateConfig(max_views=args.max_views, unseen_views=args.unseen_views, levels=levels,
                          novelty_min=args.novelty_min, grounding_threshold=args.grounding_threshold,
                          save_renders=not args.no_renders, render_scale=args.scale,
-                         locality_views=args.locality_views)
+                         locality_views=args.locality_views,
+                         max_unseen_renders=args.max_unseen_renders or None,
+                         max_locality_pairs=args.max_locality_pairs or None)
     run = open_run(args.run, args.device)
     extra = {"run": str(args.run), "device": args.device,
              "encoder": getattr(grounder.encoder, "name", None) if grounder else None}

@@ -27,9 +27,11 @@ from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
 from .unseen_states import unseen_combinations
 
-EVALUATE_VERSION = 3
+EVALUATE_VERSION = 4
 """2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames.
-3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``)."""
+3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``).
+4: the unseen-combination and locality tests say how many poses they used and asked for (a room of many objects
+has them cut to a render budget: ``max_unseen_renders``, ``max_locality_pairs``)."""
 
 
 @dataclass
@@ -40,6 +42,11 @@ class EvaluateConfig:
     """Held-out (split == test) views to evaluate, evenly spaced; None = all."""
     unseen_views: int = 3
     """Held-out poses at which unseen state combinations are rendered (needs truth)."""
+    max_unseen_renders: int | None = 48
+    """Most unseen-combination renders: with 3 per object (one per level), a room of many objects gets fewer poses
+    (at least one) so that poses x unseen combinations stays within it; None = no cap. 48 leaves rooms of up to 5
+    objects at 3 poses; a 10-object room's baseline (MK-Planes, 78 planes per scale, ~18 s a view on 2 cores) would
+    otherwise spend over an hour on this test and the locality test (docs/workflow.md, "Evaluation budget")."""
     levels: tuple[float, ...] = (0.0, 0.5, 1.0)
     """Levels each object is set to in the unseen-combination test."""
     novelty_min: float = 0.25
@@ -53,6 +60,9 @@ class EvaluateConfig:
     locality_views: int = 8
     """Held-out poses of the locality test (each object at 0 and 1, truth swept region; needs truth). Two views
     were the default until 24 Nov: on the kitchen they put a run under the 1/255 line that 8 views put over it."""
+    max_locality_pairs: int | None = 40
+    """Most (pose, object) pairs of the locality test: a room of many objects gets fewer poses (at least one);
+    None = no cap. 40 leaves rooms of up to 5 objects at 8 poses."""
     max_unseen_images: int = 12
     """How many unseen-combination model|truth pairs are saved as PNG."""
     render_scale: float = 1.0
@@ -67,6 +77,13 @@ def _evenly(items: list, n: int | None) -> list:
         return []
     idx = np.linspace(0, len(items) - 1, n).round().astype(int)
     return [items[i] for i in dict.fromkeys(idx.tolist())]
+
+
+def _within(views: int, per_view: int, budget: int | None) -> int:
+    """Poses to use when each costs ``per_view`` items and at most ``budget`` items may be spent (at least one)."""
+    if budget is None or per_view <= 0 or views * per_view <= budget:
+        return views
+    return max(1, budget // per_view)
 
 
 def _to_png(path: Path, rgb: np.ndarray) -> None:
@@ -209,7 +226,8 @@ class Evaluator:
         objects = self.ds.objects
         train_states = self.ds.state_matrix(self.ds.frames_in("train"))
         combos = unseen_combinations(len(objects), train_states, cfg.levels, cfg.novelty_min)
-        views = _evenly(self.ds.frames_in("test"), cfg.unseen_views)
+        n_views = _within(cfg.unseen_views, sum(c.unseen for c in combos), cfg.max_unseen_renders)
+        views = _evenly(self.ds.frames_in("test"), n_views)
         records, seen = [], []
         saved = model_renders = 0
         render_seconds = 0.0
@@ -275,6 +293,7 @@ class Evaluator:
             "alignment_residual": self.truth.alignment_residual(self.ds.frames),
             "levels": list(cfg.levels),
             "novelty_min": cfg.novelty_min,
+            "views": len(views), "views_asked": cfg.unseen_views, "max_renders": cfg.max_unseen_renders,
             "combinations": [asdict(c) | {"novelty": _finite_or_none(c.novelty)} for c in combos],
             "records": records,
             "psnr": summarize([r["psnr"] for r in unseen]),
@@ -381,7 +400,9 @@ class Evaluator:
     def locality(self) -> dict[str, Any]:
         if self.truth is None:
             return {"status": "skipped: no truth capture given (--truth)"}
-        frames = _evenly(self.ds.frames_in("test"), self.config.locality_views)
+        cfg = self.config
+        frames = _evenly(self.ds.frames_in("test"),
+                         _within(cfg.locality_views, len(self.ds.objects), cfg.max_locality_pairs))
         if not frames or not self.ds.objects:
             return {"status": "skipped: no held-out view or no object"}
         renders = 0
@@ -393,7 +414,7 @@ class Evaluator:
 
         out = locality(render, self.truth, frames, self._camera, self.ds.objects)
         self.timings["locality"] = {"model_renders": renders}
-        return out
+        return out | {"views": len(frames), "views_asked": cfg.locality_views, "max_pairs": cfg.max_locality_pairs}
 
     # -- everything -----------------------------------------------------------------------------------------
     def evaluate(self, out_dir: Path | None = None) -> dict[str, Any]:

@@ -449,6 +449,19 @@ def section_relevancy(sd: SceneData) -> str:
     return "".join(blocks)
 
 
+def _cut_note(sd: SceneData, key: str, budget: str) -> str:
+    """A sentence when an evaluation used fewer poses than asked: a room of many objects within the render budget."""
+    cuts = set()
+    for m in sd.methods:
+        part = _metric(m, key)
+        if isinstance(part, dict) and part.get("views_asked") and part.get("views", 0) < part["views_asked"]:
+            cuts.add((part["views"], part["views_asked"], part.get(budget)))
+    unit = "renders" if budget == "max_renders" else "(pose, object) pairs"
+    return "".join(f"<p>{views} of {asked} poses: at {asked}, this room's objects would take more than the "
+                   f"evaluation's budget of {limit} {unit} (docs/workflow.md, \"Evaluation budget\").</p>"
+                   for views, asked, limit in sorted(cuts))
+
+
 def section_unseen(sd: SceneData) -> str:
     rows = []
     for m in sd.methods:
@@ -463,6 +476,7 @@ def section_unseen(sd: SceneData) -> str:
                        "evaluation skipped it).")
     return ("<p>Held-out poses rendered at state combinations the training never showed, against the truth "
             "renderer; 'moved' = only the pixels of the objects that moved.</p>"
+            + _cut_note(sd, "unseen_combinations", "max_renders")
             + table(["method", "PSNR dB", "PSNR moved dB", "SSIM", "unseen combinations", "combinations"], rows))
 
 
@@ -488,6 +502,7 @@ def section_locality(sd: SceneData) -> str:
             f"state, dilated 2 px) and inside it. Control is local when the outside change stays at most "
             f"{fmt(limit)} and the inside change is larger. The truth renderer's own change is shown for "
             f"reference.</p>"
+            + _cut_note(sd, "locality", "max_pairs")
             + table(["method", "object", "model outside", "truth outside", "model inside", "truth inside", "views",
                      "verdict"], rows))
 

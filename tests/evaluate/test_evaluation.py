@@ -330,3 +330,34 @@ def test_a_run_trained_on_measured_gains_is_also_scored_at_the_nominal_exposure(
     assert views["00002"]["psnr_nominal"] < views["00002"]["psnr"] - 2
     assert "psnr_nominal" not in views["00004"] and held["psnr_nominal"]["n"] == 2
     assert "exposure.json" in held["psnr_nominal_source"]
+
+
+def test_a_room_of_many_objects_is_tested_at_fewer_poses_within_the_budget(eval_scene, tmp_path):
+    """Poses x unseen combinations and poses x objects stay within the budgets (at least one pose each), and the
+    metrics say how many poses were used and asked for; within the budget nothing changes."""
+    ds, run, truth = eval_scene
+    free = EvaluateConfig(max_views=1, unseen_views=3, locality_views=4, save_renders=False)
+    full = evaluate_run(run, ds, tmp_path / "full", truth, None, free)
+    per_view = full["unseen_combinations"]["n_unseen"] // 3
+    assert per_view >= 2 and full["unseen_combinations"]["views"] == 3
+    assert full["locality"]["views"] == 4 and full["locality"]["views_asked"] == 4
+
+    tight = EvaluateConfig(max_views=1, unseen_views=3, locality_views=4, save_renders=False,
+                           max_unseen_renders=2 * per_view, max_locality_pairs=3)  # 2 objects: 1 pose of pairs
+    cut = evaluate_run(run, ds, tmp_path / "cut", truth, None, tight)
+    unseen, local = cut["unseen_combinations"], cut["locality"]
+    assert (unseen["views"], unseen["views_asked"], unseen["max_renders"]) == (2, 3, 2 * per_view)
+    assert unseen["n_unseen"] == 2 * per_view and len({r["frame"] for r in unseen["records"]}) == 2
+    assert (local["views"], local["views_asked"], local["max_pairs"]) == (1, 4, 3)
+    assert len(local["records"]) == 2  # one pose x 2 objects
+
+    nothing = EvaluateConfig(max_views=1, unseen_views=3, locality_views=4, save_renders=False,
+                             max_unseen_renders=1, max_locality_pairs=1)
+    least = evaluate_run(run, ds, tmp_path / "least", truth, None, nothing)
+    assert least["unseen_combinations"]["views"] == 1 and least["locality"]["views"] == 1
+
+
+def test_the_cli_refuses_a_negative_budget(eval_scene, tmp_path):
+    with pytest.raises(InputError, match="max-locality-pairs"):
+        evaluate_cli._evaluate(evaluate_cli.build_parser().parse_args(
+            ["--run", str(tmp_path), "--out", str(tmp_path / "e"), "--max-locality-pairs", "-1"]))

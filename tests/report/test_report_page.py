@@ -71,6 +71,10 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
         assert f'<section id="{section}">' in html
     locality = html.split('<section id="locality">')[1].split("</section>")[0]
     assert locality.count(">local<") == 3 and locality.count(">not local<") == 3  # 3 objects x 2 methods
+    assert "poses:" not in locality  # all the poses asked for: no note
+    unseen = html.split('<section id="unseen">')[1].split("</section>")[0]
+    assert unseen.count("2 of 3 poses: at 3, this room's objects would take more than the evaluation's budget of "
+                        "4 renders") == 1  # one sentence for both methods
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG

@@ -24,6 +24,8 @@ rule evaluate:
         run=run_folder,
         views=config["evaluate"]["max_views"],
         unseen=config["evaluate"]["unseen_views"],
+        max_unseen=config["evaluate"]["max_unseen_renders"],
+        max_pairs=config["evaluate"]["max_locality_pairs"],
         device=config["device"],
     threads: 2
     resources:
@@ -34,4 +36,5 @@ rule evaluate:
         ENV
     shell:
         "{params.cli} evaluate --run {params.run} --data {input.data} {params.args} --out {output}"
-        " --max-views {params.views} --unseen-views {params.unseen} --device {params.device} > {log} 2>&1"
+        " --max-views {params.views} --unseen-views {params.unseen} --max-unseen-renders {params.max_unseen}"
+        " --max-locality-pairs {params.max_pairs} --device {params.device} > {log} 2>&1"
