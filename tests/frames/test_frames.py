@@ -192,3 +192,33 @@ def test_annotated_frames_win_their_window(blur_video: Path, tmp_path: Path) -> 
     assert (selection["preferred"], selection["preferred_kept"]) == (3, 3)
     assert main(["--video", str(blur_video), "--out", str(out), "--prefer-masked", str(tmp_path / "none"),
                  "--no-progress"]) == 2
+
+
+def _rotated_in_track_header(video: Path, out: Path) -> Path:
+    """A copy of an MP4 whose track header says "display turned 90 degrees", as a phone filming upright writes it
+    (the pixels stay landscape; players and OpenCV turn them)."""
+    import struct
+
+    data = bytearray(video.read_bytes())
+    box = data.find(b"tkhd")
+    assert box > 0 and data[box + 4] == 0  # version 0: 32-bit times
+    matrix = box + 4 + 4 + 20 + 8 + 8  # version/flags, times + track id + reserved + duration, reserved, layer...
+    assert struct.unpack(">9i", data[matrix:matrix + 36]) == (0x10000, 0, 0, 0, 0x10000, 0, 0, 0, 0x40000000)
+    data[matrix:matrix + 36] = struct.pack(">9i", 0, 0x10000, 0, -0x10000, 0, 0, 0, 0, 0x40000000)
+    out.write_bytes(bytes(data))
+    return out
+
+
+def test_a_portrait_phone_video_comes_out_upright(blur_video: Path, tmp_path: Path) -> None:
+    """The frames are the displayed picture (turned by the track's rotation), and frames.json gives its size:
+    masks drawn on the video as a player shows it, and the poses, fit the frames."""
+    portrait = _rotated_in_track_header(blur_video, tmp_path / "portrait.mp4")
+    out = tmp_path / "frames"
+    extract_frames(FramesConfig(source=portrait, out_dir=out, progress=False))
+    meta = json.loads((out / "frames.json").read_text())
+    assert (meta["width"], meta["height"]) == (HEIGHT, WIDTH)
+    frame = cv2.imread(str(out / "images" / "frame_00003.png")).astype(float)
+    assert frame.shape == (WIDTH, HEIGHT, 3)
+    right, wrong = (np.abs(frame - cv2.rotate(textured_frame(3), turn)).mean()
+                    for turn in (cv2.ROTATE_90_CLOCKWISE, cv2.ROTATE_90_COUNTERCLOCKWISE))
+    assert right < 12 and wrong > 2 * right  # turned clockwise, as a player shows it (mp4v is lossy)
