@@ -20,6 +20,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from stages.scene import Camera, Frame
 
@@ -68,7 +69,7 @@ def locality(render: RenderFn, truth: Any, frames: Sequence[Frame], camera_of: C
              objects: Sequence[str]) -> dict[str, Any]:
     """Per object: the model's and the truth's mean change outside / inside the swept region, x255."""
     records = []
-    for frame in frames:
+    for frame in tqdm(frames, desc="locality views", unit="view"):  # 2-4 renders per object each
         camera = camera_of(frame)
         own = {o: float(v) for o, v in (truth.state_for(frame) or frame.state or {}).items()}
         base = {o: own.get(o, 0.0) for o in objects}
