@@ -30,8 +30,9 @@ from .unseen_states import unseen_combinations
 EVALUATE_VERSION = 4
 """2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames.
 3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``).
-4: the unseen-combination and locality tests say how many poses they used and asked for (a room of many objects
-has them cut to a render budget: ``max_unseen_renders``, ``max_locality_pairs``)."""
+4: the unseen-combination and locality tests say how many poses they used and asked for, and whether the render
+budget cut them (a room of many objects: ``max_unseen_renders``, ``max_locality_pairs``; a test split with
+fewer frames than asked also gives fewer poses, not cut)."""
 
 
 @dataclass
@@ -84,6 +85,11 @@ def _within(views: int, per_view: int, budget: int | None) -> int:
     if budget is None or per_view <= 0 or views * per_view <= budget:
         return views
     return max(1, budget // per_view)
+
+
+def _cut(views: int, asked: int, available: int) -> bool:
+    """Whether the budget left fewer poses than asking alone would have (a short test split is not a cut)."""
+    return min(views, available) < min(asked, available)
 
 
 def _to_png(path: Path, rgb: np.ndarray) -> None:
@@ -294,6 +300,7 @@ class Evaluator:
             "levels": list(cfg.levels),
             "novelty_min": cfg.novelty_min,
             "views": len(views), "views_asked": cfg.unseen_views, "max_renders": cfg.max_unseen_renders,
+            "views_cut": _cut(n_views, cfg.unseen_views, len(self.ds.frames_in("test"))),
             "combinations": [asdict(c) | {"novelty": _finite_or_none(c.novelty)} for c in combos],
             "records": records,
             "psnr": summarize([r["psnr"] for r in unseen]),
@@ -401,8 +408,8 @@ class Evaluator:
         if self.truth is None:
             return {"status": "skipped: no truth capture given (--truth)"}
         cfg = self.config
-        frames = _evenly(self.ds.frames_in("test"),
-                         _within(cfg.locality_views, len(self.ds.objects), cfg.max_locality_pairs))
+        n_views = _within(cfg.locality_views, len(self.ds.objects), cfg.max_locality_pairs)
+        frames = _evenly(self.ds.frames_in("test"), n_views)
         if not frames or not self.ds.objects:
             return {"status": "skipped: no held-out view or no object"}
         renders = 0
@@ -414,7 +421,8 @@ class Evaluator:
 
         out = locality(render, self.truth, frames, self._camera, self.ds.objects)
         self.timings["locality"] = {"model_renders": renders}
-        return out | {"views": len(frames), "views_asked": cfg.locality_views, "max_pairs": cfg.max_locality_pairs}
+        return out | {"views": len(frames), "views_asked": cfg.locality_views, "max_pairs": cfg.max_locality_pairs,
+                      "views_cut": _cut(n_views, cfg.locality_views, len(self.ds.frames_in("test")))}
 
     # -- everything -----------------------------------------------------------------------------------------
     def evaluate(self, out_dir: Path | None = None) -> dict[str, Any]:

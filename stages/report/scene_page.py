@@ -450,11 +450,11 @@ def section_relevancy(sd: SceneData) -> str:
 
 
 def _cut_note(sd: SceneData, key: str, budget: str) -> str:
-    """A sentence when an evaluation used fewer poses than asked: a room of many objects within the render budget."""
+    """A sentence when the render budget gave an evaluation fewer poses than asked (a room of many objects)."""
     cuts = set()
     for m in sd.methods:
         part = _metric(m, key)
-        if isinstance(part, dict) and part.get("views_asked") and part.get("views", 0) < part["views_asked"]:
+        if isinstance(part, dict) and part.get("views_cut"):
             cuts.add((part["views"], part["views_asked"], part.get(budget)))
     unit = "renders" if budget == "max_renders" else "(pose, object) pairs"
     return "".join(f"<p>{views} of {asked} poses: at {asked}, this room's objects would take more than the "

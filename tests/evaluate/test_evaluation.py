@@ -341,6 +341,7 @@ def test_a_room_of_many_objects_is_tested_at_fewer_poses_within_the_budget(eval_
     per_view = full["unseen_combinations"]["n_unseen"] // 3
     assert per_view >= 2 and full["unseen_combinations"]["views"] == 3
     assert full["locality"]["views"] == 4 and full["locality"]["views_asked"] == 4
+    assert not full["unseen_combinations"]["views_cut"] and not full["locality"]["views_cut"]
 
     tight = EvaluateConfig(max_views=1, unseen_views=3, locality_views=4, save_renders=False,
                            max_unseen_renders=2 * per_view, max_locality_pairs=3)  # 2 objects: 1 pose of pairs
@@ -349,12 +350,17 @@ def test_a_room_of_many_objects_is_tested_at_fewer_poses_within_the_budget(eval_
     assert (unseen["views"], unseen["views_asked"], unseen["max_renders"]) == (2, 3, 2 * per_view)
     assert unseen["n_unseen"] == 2 * per_view and len({r["frame"] for r in unseen["records"]}) == 2
     assert (local["views"], local["views_asked"], local["max_pairs"]) == (1, 4, 3)
+    assert unseen["views_cut"] and local["views_cut"]
     assert len(local["records"]) == 2  # one pose x 2 objects
 
     nothing = EvaluateConfig(max_views=1, unseen_views=3, locality_views=4, save_renders=False,
                              max_unseen_renders=1, max_locality_pairs=1)
     least = evaluate_run(run, ds, tmp_path / "least", truth, None, nothing)
     assert least["unseen_combinations"]["views"] == 1 and least["locality"]["views"] == 1
+
+    more = EvaluateConfig(max_views=1, unseen_views=1, locality_views=50, save_renders=False)
+    short = evaluate_run(run, ds, tmp_path / "short", truth, None, more)["locality"]
+    assert short["views"] == len(ds.frames_in("test")) < 50 and not short["views_cut"]  # the split, not the budget
 
 
 def test_the_cli_refuses_a_negative_budget(eval_scene, tmp_path):

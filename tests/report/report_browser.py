@@ -116,13 +116,14 @@ def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("li
                    "unseen_combinations": {"status": "computed", "psnr": {"mean": 18.0}, "psnr_moved": {"mean": 15.0},
                                            "ssim": {"mean": 0.6}, "records": records,
                                            # 2 of 3 poses: the room's combinations were over the render budget
-                                           "views": 2, "views_asked": 3, "max_renders": 4,
+                                           "views": 2, "views_asked": 3, "max_renders": 4, "views_cut": True,
                                            "combinations": [{"unseen": True}, {"unseen": True}, {"unseen": False}]},
                    "grounding": {"status": "computed", "threshold": 0.5, "sources": ["probs"], "queries": queries,
                                  "miou_probs": 0.5, "miou_probs_name": 0.5},
                    # the first method keeps its changes local; the others leak 3/255 onto the rest of the room
-                   "locality": {"status": "computed", "outside_limit_x255": 1.0, "views": 2, "views_asked": 2,
-                                "max_pairs": 32, "objects": {
+                   # fewer poses than asked because the test split is short: not the budget, no note
+                   "locality": {"status": "computed", "outside_limit_x255": 1.0, "views": 2, "views_asked": 8,
+                                "max_pairs": 40, "views_cut": False, "objects": {
                        obj: {"model_outside_x255": {"mean": 0.2 + 3.0 * min(k, 1), "n": 2},
                              "truth_outside_x255": {"mean": 0.5, "n": 2},
                              "model_inside_x255": {"mean": 30.0, "n": 2}, "truth_inside_x255": {"mean": 35.0, "n": 2},
