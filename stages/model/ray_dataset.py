@@ -69,7 +69,9 @@ def label_maps(ds: SceneDataset, frames: list[Frame]) -> np.ndarray:
         return out
     # one read of every mask: the objects' usual sizes come from every frame (as the labels stage counts them),
     # the label maps from the requested ones
-    index = {id(f): k for k, f in enumerate(frames)}
+    rows: dict[str, list[int]] = {}  # by frame id: the caller's Frame objects need not be the dataset's
+    for k, f in enumerate(frames):
+        rows.setdefault(f.frame_id, []).append(k)
     ids, counts = [], []
     for f in ds.frames:
         mask = _mask_or_none(ds, f)
@@ -77,10 +79,10 @@ def label_maps(ds: SceneDataset, frames: list[Frame]) -> np.ndarray:
             continue
         ids.append(f.frame_id)
         counts.append(mask[..., :-1].reshape(-1, ds.n_objects).sum(0))
-        if id(f) in index:
-            labels = out[index[id(f)]]
-            labels[:] = np.argmax(mask, axis=-1)
+        if f.frame_id in rows:
+            labels = np.argmax(mask, axis=-1).astype(np.int8)
             labels[~mask.any(axis=-1)] = -1
+            out[rows[f.frame_id]] = labels
     if ids:
         unreliable = {i for i, small in zip(ids, unreliable_masks(np.array(counts), cam.height, cam.width),
                                             strict=True) if small.any()}

@@ -43,3 +43,15 @@ def test_a_small_object_everywhere_no_longer_switches_the_mask_loss_off(tmp_path
     maps = label_maps(ds, ds.frames)
     assert [bool((m == -1).all()) for m in maps] == [False, False, False, True, False, False]
     assert all((m[:2, :3] == 0).all() for k, m in enumerate(maps) if k != 3)
+
+
+def test_label_maps_follow_frame_ids_not_frame_objects(tmp_path):
+    """A caller may pass Frames it built itself (copies, a re-read dataset): the maps are those of their ids."""
+    import dataclasses
+
+    ds = hand_built_dataset(tmp_path / "ds", n_frames=4, width=W, height=H,
+                            labels=lambda i, h, w: np.full((h, w), i % 3))
+    picked = [ds.frames[2], ds.frames[0]]
+    copies = [dataclasses.replace(f) for f in picked]
+    np.testing.assert_array_equal(label_maps(ds, copies), label_maps(ds, picked))
+    assert not (label_maps(ds, copies) == -1).all()
