@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from stages.scene import InputError, SceneDataset
-from stages.scene.exposure import estimate_exposure
+from stages.scene.exposure import ExposureEstimate, estimate_exposure
 
 from .config import AppearanceConfig
 
@@ -19,17 +19,21 @@ EXPOSURE_FILE = "exposure.json"
 frame the measurement tied, held-out frames included (the evaluation scores those at the nominal exposure too)."""
 
 
-def resolve_appearance(config: AppearanceConfig, ds: SceneDataset) -> dict[str, Any]:
+def resolve_appearance(config: AppearanceConfig, ds: SceneDataset,
+                       measured: ExposureEstimate | None = None) -> dict[str, Any]:
     """Replace ``auto`` in ``config.mode`` by the mode the data call for; what was done and why (run.json), and
     with ``measured`` the log gains per frame id under ``log_gains`` (for the training rays, not for run.json).
 
-    The resolved mode is what the run's config records, so a resumed run of ``auto`` finds the same config in
-    its checkpoint, and a reloaded run builds its model without measuring again."""
+    ``measured``: the dataset's estimate when it was measured once for every method (``livescene train
+    --exposure``, the workflow's ``exposure`` rule), else it is measured here. The resolved mode is what the
+    run's config records, so a resumed run of ``auto`` finds the same config in its checkpoint, and a reloaded
+    run builds its model without measuring again."""
     if config.mode not in ("auto", "measured"):
         return {"mode": config.mode}
-    estimate = estimate_exposure(ds)
+    estimate = measured if measured is not None else estimate_exposure(ds)
     spread = estimate.spread
-    out: dict[str, Any] = {"spread": spread, "pairs": estimate.pairs, "tied_frames": int(estimate.tied.sum())}
+    out: dict[str, Any] = {"spread": spread, "pairs": estimate.pairs, "tied_frames": int(estimate.tied.sum()),
+                           "measured_by": "exposure file" if measured is not None else "trainer"}
     if config.mode == "auto":
         if spread is None:
             chosen, why = "none", "too few overlapping neighbour frames to measure the exposure"

@@ -315,6 +315,9 @@ class RunConfig:
     """Scene dataset the run trains on."""
     language_targets: str = ""
     """Language targets .npz (empty = no language table)."""
+    exposure: str = ""
+    """The dataset's exposure estimate (``livescene scene exposure --out``) for ``model.appearance.mode`` auto or
+    measured; empty = the trainer measures the frames itself."""
     model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
     """Model hyperparameters."""
     train: TrainConfig = dataclasses.field(default_factory=TrainConfig)

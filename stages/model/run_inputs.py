@@ -23,6 +23,7 @@ EXECUTION_ONLY: dict[str, frozenset[str] | None] = {
     "trust": None,
     "data": None,
     "language_targets": None,
+    "exposure": None,
     "preset": None,
 }
 """Config entries a resumed run may change: how long and how it runs, where the inputs live (their contents are in

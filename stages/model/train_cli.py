@@ -20,6 +20,8 @@ def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="run folder to write")
     p.add_argument("--state-mode", choices=["given", "learned"], help="given (dataset states) or learned")
     p.add_argument("--language-targets", help="targets .npz from `livescene language targets`: enables the table")
+    p.add_argument("--exposure", help="the dataset's exposure estimate from `livescene scene exposure --out` (for "
+                   "model.appearance.mode auto / measured): read instead of measured again")
     p.add_argument("--max-seconds", type=float, help="wall-clock budget; training stops and saves when spent")
     p.add_argument("--max-steps", type=int, help="optimisation steps (overrides the preset)")
     p.add_argument("--seed", type=int, help="seed of every random generator (default 0)")
@@ -46,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_steps is not None:
         overrides.append(f"train.max_steps={args.max_steps}")
     config = load_config(args.preset, overrides, method=args.method, seed=args.seed, data=args.data,
-                         language_targets=args.language_targets)
+                         language_targets=args.language_targets, exposure=args.exposure)
     trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress,
                       restart_stale=args.restart_stale)
     summary = trainer.train()

@@ -32,6 +32,7 @@ import torch
 from tqdm import tqdm
 
 from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
+from stages.scene.exposure import read_exposure
 
 from .allocator import keep_freed_memory
 from .appearance_choice import EXPOSURE_FILE, resolve_appearance
@@ -183,7 +184,12 @@ class Trainer:
         if not cfg.data:
             raise InputError("--data", "no dataset given", "pass --data DS (a scene dataset folder)")
         self.ds = read_scene(cfg.data)
-        self.appearance = resolve_appearance(cfg.model.appearance, self.ds)
+        measured = None
+        if cfg.exposure and cfg.model.appearance.mode in ("auto", "measured"):
+            measured = read_exposure(cfg.exposure, self.ds)
+        elif cfg.exposure:
+            print(f"{cfg.exposure}: not read, model.appearance.mode is {cfg.model.appearance.mode}", file=sys.stderr)
+        self.appearance = resolve_appearance(cfg.model.appearance, self.ds, measured)
         if "requested" in self.appearance:
             print(f"appearance auto: {self.appearance['reason']}: {self.appearance['mode']}", file=sys.stderr)
         mode = cfg.model.state.mode

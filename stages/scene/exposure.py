@@ -13,13 +13,17 @@ On the synthetic captures, whose gains are known: constant exposure reads 0.0006
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 from .dataset import Frame, SceneDataset
+from .errors import InputError
 
 OFFSETS = (1, 3, 9)
 """Frame distances of the pairs that are compared. Each pair's ratio carries a small bias where the scene itself
@@ -57,6 +61,8 @@ class ExposureEstimate:
     """Pairs of frames that overlapped enough to be compared."""
     tied: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     """[N] whether the frame took part in at least one compared pair."""
+    images_sha256: str = ""
+    """Digest of the measured image files (``images_digest``): a saved estimate is only used for those images."""
 
     @property
     def spread(self) -> float | None:
@@ -66,10 +72,14 @@ class ExposureEstimate:
         return float(g.std(axis=0).mean()) if len(g) >= 3 else None
 
     def to_dict(self) -> dict:
+        """The estimate as JSON (``livescene scene exposure --out``, the workflow's ``exposure`` rule). The gains
+        are written in full: JSON's shortest repr reads back to the same doubles, so a trainer reading the file
+        divides its images exactly as one that measured them itself."""
         return {"spread": self.spread, "pairs": self.pairs, "frames": len(self.frame_ids),
                 "tied_frames": int(self.tied.sum()), "offsets": list(OFFSETS), "max_side": MAX_SIDE,
-                "log_gains": {f: [round(float(v), 5) for v in g] for f, g in zip(self.frame_ids, self.log_gains,
-                                                                                  strict=True)}}
+                "images_sha256": self.images_sha256,
+                "untied": [f for f, t in zip(self.frame_ids, self.tied, strict=True) if not t],
+                "log_gains": {f: [float(v) for v in g] for f, g in zip(self.frame_ids, self.log_gains, strict=True)}}
 
 
 def _small(rgb: np.ndarray) -> np.ndarray:
@@ -175,7 +185,45 @@ def playback_order(ds: SceneDataset) -> list[Frame]:
     return list(ds.frames)
 
 
+def images_digest(ds: SceneDataset) -> str:
+    """SHA-256 over the image files of the dataset's frames in playback order (ids and bytes): what a saved
+    estimate was measured on."""
+    h = hashlib.sha256()
+    for f in playback_order(ds):
+        h.update(f"{f.frame_id}:".encode())
+        h.update(ds.image_path(f).read_bytes())
+    return h.hexdigest()
+
+
 def estimate_exposure(ds: SceneDataset) -> ExposureEstimate:
     """Per-frame log gains of every frame of a dataset, train and test, in playback order."""
     frames = playback_order(ds)
-    return estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames])
+    est = estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames])
+    est.images_sha256 = images_digest(ds)
+    return est
+
+
+def read_exposure(path: str | Path, ds: SceneDataset) -> ExposureEstimate:
+    """A saved estimate (``ExposureEstimate.to_dict``) of ``ds``'s frames, checked to be of the same images."""
+    path = Path(path)
+    remeasure = f"measure them again: livescene scene exposure {ds.root} --out {path}"
+    try:
+        data = json.loads(path.read_text())
+        gains = data["log_gains"]
+        ids, untied, digest = list(gains), set(data["untied"]), str(data["images_sha256"])
+        log_gains = np.array([[float(v) for v in gains[f]] for f in ids], dtype=np.float64).reshape(len(ids), 3)
+        pairs = int(data["pairs"])
+    except FileNotFoundError:
+        raise InputError(path, "no such exposure file", remeasure) from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(path, f"not an exposure estimate ({type(exc).__name__}: {exc})", remeasure) from None
+    order = [f.frame_id for f in playback_order(ds)]
+    if ids != order:
+        missing, extra = sorted(set(order) - set(ids)), sorted(set(ids) - set(order))
+        what = (f"frames {missing[:4]} of the dataset are missing" if missing
+                else f"it names frames {extra[:4]} the dataset does not have" if extra
+                else "its frames are in another order")
+        raise InputError(path, f"measured on other frames than {ds.root}'s: {what}", remeasure)
+    if digest != images_digest(ds):
+        raise InputError(path, f"measured on other images than {ds.root}'s (their digest differs)", remeasure)
+    return ExposureEstimate(ids, log_gains, pairs, np.array([f not in untied for f in ids]), digest)

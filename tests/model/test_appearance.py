@@ -132,6 +132,28 @@ def test_measured_gains_are_divided_out_of_the_training_images(tmp_path, tiny_co
                                atol=0.01)
 
 
+def test_a_saved_estimate_trains_as_the_trainer_s_own_measurement(tmp_path, tiny_config):
+    """``--exposure`` (the workflow measures once per scene): the same gains, so the same training images bit for
+    bit and the same choice; a mode that measures nothing does not read the file."""
+    from stages.scene.cli import main as scene_main
+
+    ds = write_pan_dataset(tmp_path / "ds", np.random.default_rng(11).normal(0.0, 0.05, (8, 3)))
+    saved = tmp_path / "exposure.json"
+    assert scene_main(["exposure", str(ds.root), "--out", str(saved)]) == 0
+    own = Trainer(tiny_config(ds.root, "model.appearance.mode=auto", steps=1), tmp_path / "own", device="cpu",
+                  progress=False)
+    cfg = tiny_config(ds.root, "model.appearance.mode=auto", steps=1)
+    cfg.exposure = str(saved)
+    read = Trainer(cfg, tmp_path / "read", device="cpu", progress=False)
+    assert own.appearance["mode"] == read.appearance["mode"] == "measured"
+    assert read.appearance["measured_by"] == "exposure file" and own.appearance["measured_by"] == "trainer"
+    assert own.appearance["spread"] == read.appearance["spread"]
+    assert torch.equal(own.train_rays.images, read.train_rays.images) and own.data_digest == read.data_digest
+    cfg = tiny_config(ds.root, steps=1)
+    cfg.exposure = str(tmp_path / "absent.json")  # not read: mode none
+    assert Trainer(cfg, tmp_path / "none", device="cpu", progress=False).appearance == {"mode": "none"}
+
+
 def test_measured_mode_refuses_frames_it_cannot_measure(tiny_dataset, tmp_path, tiny_config):
     """Random images (no frame overlaps another): ``measured`` names the data and the fix; ``auto`` keeps them."""
     refused = r"transforms.json: .*cannot be measured.*fix: set model\.appearance\.mode=affine"

@@ -7,8 +7,16 @@ import json
 import numpy as np
 import pytest
 
+from stages.scene import InputError
 from stages.scene.cli import main as scene_main
-from stages.scene.exposure import central_value, edge_strength, estimate_exposure, estimate_log_gains, pair_log_ratio
+from stages.scene.exposure import (
+    central_value,
+    edge_strength,
+    estimate_exposure,
+    estimate_log_gains,
+    pair_log_ratio,
+    read_exposure,
+)
 from tests.conftest import make_tiny_dataset
 from tests.pan_frames import pan, write_pan_dataset
 
@@ -64,6 +72,41 @@ def test_the_cli_writes_the_estimate(tmp_path, capsys):
     assert saved["spread"] == pytest.approx(float((gains - gains.mean(0)).std(0).mean()), abs=0.004)
     assert list(saved["log_gains"]) == [f"{i:05d}" for i in range(8)] and saved["tied_frames"] == 8
     assert "spread" in capsys.readouterr().out
+
+
+def test_a_saved_estimate_reads_back_to_the_same_doubles(tmp_path):
+    """What the workflow's exposure rule writes, every training reads: the gains must be the measured ones to the
+    last bit, or some training pixels would round the other way."""
+    rng = np.random.default_rng(9)
+    ds = write_pan_dataset(tmp_path / "ds", rng.normal(0.0, 0.05, (10, 3)))
+    assert scene_main(["exposure", str(ds.root), "--out", str(tmp_path / "exposure.json")]) == 0
+    measured, saved = estimate_exposure(ds), read_exposure(tmp_path / "exposure.json", ds)
+    assert saved.frame_ids == measured.frame_ids and saved.pairs == measured.pairs
+    assert saved.log_gains.tobytes() == measured.log_gains.tobytes() and saved.spread == measured.spread
+    np.testing.assert_array_equal(saved.tied, measured.tied)
+
+
+def test_a_saved_estimate_of_other_images_is_refused(tmp_path):
+    """A stale file (the frames re-extracted, an image edited, another dataset) names itself and the command that
+    measures again; nothing is trained on gains of other images."""
+    rng = np.random.default_rng(10)
+    ds = write_pan_dataset(tmp_path / "ds", rng.normal(0.0, 0.05, (8, 3)))
+    other = write_pan_dataset(tmp_path / "other", rng.normal(0.0, 0.05, (6, 3)))
+    saved = tmp_path / "exposure.json"
+    scene_main(["exposure", str(ds.root), "--out", str(saved)])
+    fix = r"fix: measure them again: livescene scene exposure"
+    other_frames = r"exposure.json: measured on other frames .*names frames .*00006.* the dataset does not have"
+    with pytest.raises(InputError, match=rf"{other_frames}.*{fix}"):
+        read_exposure(saved, other)
+    image = ds.image_path(ds.frames[3])
+    image.write_bytes(other.image_path(other.frames[3]).read_bytes())
+    with pytest.raises(InputError, match=rf"exposure.json: measured on other images .*digest.*{fix}"):
+        read_exposure(saved, ds)
+    (tmp_path / "broken.json").write_text('{"spread": 0.1}')
+    with pytest.raises(InputError, match=rf"broken.json: not an exposure estimate \(KeyError.*{fix}"):
+        read_exposure(tmp_path / "broken.json", ds)
+    with pytest.raises(InputError, match=rf"absent.json: no such exposure file.*{fix}"):
+        read_exposure(tmp_path / "absent.json", ds)
 
 
 def test_the_gains_do_not_depend_on_the_number_of_opencv_threads():

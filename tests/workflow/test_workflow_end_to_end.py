@@ -38,11 +38,15 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     assert run.code == 0, run.output[-4000:]
 
     results = wf.root / "results" / "tiny"
-    for rule in ("capture", "frames", "poses", "pose_compare", "labels", "states", "assemble", "language_targets",
-                 "train_livescene", "evaluate_livescene", "sweep_livescene", "control_livescene", "export_livescene",
+    for rule in ("capture", "frames", "poses", "pose_compare", "labels", "states", "assemble", "exposure",
+                 "language_targets", "train_livescene", "evaluate_livescene", "sweep_livescene", "control_livescene", "export_livescene",
                  "report"):
         assert (results / "benchmarks" / f"{rule}.tsv").is_file(), rule
         assert (results / "logs" / f"{rule}.log").is_file(), rule
+    # the frames' exposure measured once for the scene (train.appearance: auto), and the training read it
+    appearance = json.loads((results / "runs" / "livescene" / "run.json").read_text())["appearance"]
+    assert appearance["measured_by"] == "exposure file" and appearance["requested"] == "auto"
+    assert appearance["spread"] == json.loads((results / "exposure.json").read_text())["spread"]
     exported = json.loads((results / "export" / "livescene" / "export.json").read_text())
     closed, opened = {"cabinet": 0.0, "drawer": 0.0}, {"cabinet": 1.0, "drawer": 1.0}  # config export.states
     assert [e["states"] for e in exported["exports"]] == [closed, opened]

@@ -223,13 +223,23 @@ def test_poses_orient_false_keeps_every_world(workflow_copy, tmp_path):
 
 def test_appearance_correction_reaches_every_training(workflow_copy):
     """auto by default (measured gains divided out where they vary); every mode reaches every training, and none
-    leaves the model at its own default, the reference's images."""
-    jobs = workflow_copy.dry_run().scene_jobs("demo")["train"]
+    leaves the model at its own default, the reference's images. The exposure is measured once per scene (rule
+    exposure) and every training reads that file; modes that measure nothing have no such rule."""
+    plan = workflow_copy.dry_run().scene_jobs("demo")
+    jobs = plan["train"]
     assert len(jobs) == 3 and all("--set model.appearance.mode=auto" in t for t in jobs)
-    chosen = workflow_copy.write_config(train={"appearance": "none"})
-    jobs = workflow_copy.dry_run("--configfile", str(chosen)).scene_jobs("demo")["train"]
-    assert len(jobs) == 3 and not any("appearance" in t for t in jobs)
-    for mode in ("affine", "measured", "auto"):
+    assert len(plan["exposure"]) == 1 and "scene exposure results/demo/dataset --out results/demo/exposure.json" in \
+        plan["exposure"][0]
+    assert all("--exposure results/demo/exposure.json" in t for t in jobs)
+    for mode in ("none", "affine"):
         chosen = workflow_copy.write_config(train={"appearance": mode})
-        jobs = workflow_copy.dry_run("--configfile", str(chosen)).scene_jobs("demo")["train"]
+        plan = workflow_copy.dry_run("--configfile", str(chosen)).scene_jobs("demo")
+        jobs = plan["train"]
+        assert len(jobs) == 3 and "exposure" not in plan and not any("--exposure" in t for t in jobs)
+        assert all(("appearance" in t) == (mode != "none") for t in jobs)
+    for mode in ("measured", "auto"):
+        chosen = workflow_copy.write_config(train={"appearance": mode})
+        plan = workflow_copy.dry_run("--configfile", str(chosen)).scene_jobs("demo")
+        jobs = plan["train"]
         assert len(jobs) == 3 and all(f"--set model.appearance.mode={mode}" in t for t in jobs)
+        assert len(plan["exposure"]) == 1 and all("--exposure results/demo/exposure.json" in t for t in jobs)

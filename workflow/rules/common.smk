@@ -99,6 +99,8 @@ def train_input(wildcards):
     files = dataset_input(wildcards) | model_config_files(wildcards.method)
     if wildcards.method == "livescene" and has_names(wildcards.scene):
         files["targets"] = R(wildcards.scene, "language", "targets.npz")
+    if needed(wildcards.scene, "exposure"):
+        files["exposure"] = R(wildcards.scene, "exposure.json")
     return files
 
 
@@ -111,6 +113,8 @@ def train_args(wildcards, input):
         args.append("--state-mode learned")
     if config["train"]["appearance"] != "none":  # the model's default: the reference
         args.append(f"--set model.appearance.mode={config['train']['appearance']}")
+    if "exposure" in input.keys():  # measured once per scene (rule exposure), not once per method
+        args.append(f"--exposure {input.exposure}")
     return " ".join(args)
 
 

@@ -133,6 +133,10 @@ def plan(scene):
                            else "the poses stage orients the world" if framed else "truth poses are upright")
     p["scene_validate"] = (kind == "dataset", "ready dataset checked against the contract" if kind == "dataset"
                            else "dataset written by this workflow (validated when written)")
+    appearance = config["train"]["appearance"]
+    exposure = appearance in ("auto", "measured")
+    p["exposure"] = (exposure, "frames' exposure measured once for every method (train.appearance: "
+                     f"{appearance})" if exposure else f"train.appearance is {appearance}")
     p["language_targets"] = (has_names(scene), "object names given" if has_names(scene) else "scene has no names")
     for m in METHODS:
         chosen = m in methods(scene)

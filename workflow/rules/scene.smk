@@ -1,6 +1,7 @@
 # Scene dataset: assemble frames, poses, labels and states into the dataset contract (the dataset
 # stage, `livescene dataset assemble`), or check a ready dataset against it (`livescene scene`) and copy it
-# into the upright world (`livescene dataset orient`).
+# into the upright world (`livescene dataset orient`); measure its frames' exposure once for every method
+# (`livescene scene exposure`).
 
 
 rule assemble:
@@ -71,3 +72,24 @@ rule dataset_orient:
         ENV
     shell:
         "{params.cli} dataset orient --data {input.data} --out {output} > {log} 2>&1"
+
+
+rule exposure:
+    input:
+        unpack(dataset_input),
+    output:
+        R("{scene}", "exposure.json"),
+    log:
+        log_path("exposure"),
+    benchmark:
+        bench_path("exposure")
+    params:
+        cli=LIVESCENE,
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=30,  # minutes: ~7 s for the demo's 120 frames, about a minute for a 300-frame phone video
+    conda:
+        ENV
+    shell:
+        "{params.cli} scene exposure {input.data} --out {output} > {log} 2>&1"
