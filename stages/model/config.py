@@ -219,7 +219,7 @@ class AppearanceConfig:
     (``stages.model.appearance_choice``)."""
     auto_spread: float = 0.01
     """``auto``: the least spread of the frames' log gains (std over frames; ``stages.scene.exposure``) that turns
-    the correction on. Constant exposure reads 0.0015 on the synthetic captures; docs/model.md has the
+    the correction on. Constant exposure reads 0.0005-0.0008 on the synthetic captures; docs/model.md has the
     measurements behind the value."""
 
 

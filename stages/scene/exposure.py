@@ -3,11 +3,12 @@
 A phone's auto exposure scales every pixel of a frame by a gain per colour channel. Two neighbouring
 frames of a video see mostly the same surfaces, so after aligning them by dense optical flow (OpenCV's
 DIS) the central log ratio of their colours is the difference of their log gains; surfaces that moved,
-pixels the flow cannot follow (forward-backward check), edges and clipped pixels are left out. A least
-squares fit over the pairs of frames 1, 3 and 9 apart gives every frame's log gain (zero mean), and the
+pixels the flow cannot follow (forward-backward check), edges, clipped pixels and, where the dataset has
+masks, the movable objects (a door turning towards the light changes its shading, not the exposure) are left
+out. A least squares fit over the pairs of frames 1, 3 and 9 apart gives every frame's log gain (zero mean), and the
 spread of those gains says whether a per-frame colour correction is worth learning.
 
-On the synthetic captures, whose gains are known: constant exposure reads 0.0006-0.0037, a jitter of 0.04 reads
+On the synthetic captures, whose gains are known: constant exposure reads 0.0005-0.0008, a jitter of 0.04 reads
 0.038 and one of 0.10 reads 0.102 (docs/model.md, "Exposure", has the table).
 """
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from .dataset import Frame, SceneDataset
 from .errors import InputError
+from .masks import mask_path
 
 OFFSETS = (1, 3, 9)
 """Frame distances of the pairs that are compared. Each pair's ratio carries a small bias where the scene itself
@@ -47,6 +49,9 @@ MIN_CORRELATION = 0.8
 that are not the same surfaces (frames that do not overlap, an unordered collection)."""
 CLIP = (8, 247)
 """8-bit values outside this range may be clipped in either frame: their ratio is not the gain's."""
+MASK_MARGIN_PX = 2
+"""Object masks are grown by this many pixels (at the compared size) before their pixels are left out: a
+propagated mask's edge is a pixel or two off, and an object's border mixes it with the room."""
 
 
 @dataclass
@@ -61,8 +66,10 @@ class ExposureEstimate:
     """Pairs of frames that overlapped enough to be compared."""
     tied: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     """[N] whether the frame took part in at least one compared pair."""
-    images_sha256: str = ""
-    """Digest of the measured image files (``images_digest``): a saved estimate is only used for those images."""
+    inputs_sha256: str = ""
+    """Digest of the measured image and mask files (``inputs_digest``): a saved estimate is only used for those."""
+    masked: bool = False
+    """Whether the movable objects' pixels were left out (the dataset has masks)."""
 
     @property
     def spread(self) -> float | None:
@@ -77,7 +84,7 @@ class ExposureEstimate:
         divides its images exactly as one that measured them itself."""
         return {"spread": self.spread, "pairs": self.pairs, "frames": len(self.frame_ids),
                 "tied_frames": int(self.tied.sum()), "offsets": list(OFFSETS), "max_side": MAX_SIDE,
-                "images_sha256": self.images_sha256,
+                "inputs_sha256": self.inputs_sha256, "masked": self.masked,
                 "untied": [f for f, t in zip(self.frame_ids, self.tied, strict=True) if not t],
                 "log_gains": {f: [float(v) for v in g] for f, g in zip(self.frame_ids, self.log_gains, strict=True)}}
 
@@ -91,10 +98,23 @@ def _small(rgb: np.ndarray) -> np.ndarray:
     return img
 
 
-def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow) -> np.ndarray | None:
+def static_map(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """[H, W] bool at the compared ``shape``: True where a frame's one-hot mask ([H', W', objects + 1], background
+    last) shows no object, the objects grown by MASK_MARGIN_PX. Integer operations only (area averaging of 0/255
+    and a dilation), so the same pixels are left out on every machine."""
+    objects = np.where(mask[..., -1], 0, 255).astype(np.uint8)
+    if objects.shape != shape:
+        objects = cv2.resize(objects, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+    grown = cv2.dilate(objects, np.ones((2 * MASK_MARGIN_PX + 1,) * 2, np.uint8))
+    return grown == 0
+
+
+def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow, static_a: np.ndarray | None = None,
+                   static_b: np.ndarray | None = None) -> np.ndarray | None:
     """Median of log(b / a) per channel over the pixels of ``a`` that ``b`` sees ([3]), or None without overlap.
 
-    ``a``, ``b``: uint8 RGB of one size."""
+    ``a``, ``b``: uint8 RGB of one size; ``static_a``, ``static_b``: their ``static_map``s, when known (pixels on
+    a movable object in either frame are left out)."""
     ga, gb = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY), cv2.cvtColor(b, cv2.COLOR_RGB2GRAY)
     fwd = flow.calc(ga, gb, None)
     bwd = flow.calc(gb, ga, None)
@@ -111,6 +131,10 @@ def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow) -> np
     lo, hi = CLIP
     unclipped = (a.min(-1) > lo) & (a.max(-1) < hi) & (b_on_a.min(-1) > lo) & (b_on_a.max(-1) < hi)
     ok = consistent & inside & smooth & unclipped
+    if static_a is not None and static_b is not None:
+        xi = np.clip(np.rint(mx), 0, w - 1).astype(np.intp)
+        yi = np.clip(np.rint(my), 0, h - 1).astype(np.intp)
+        ok &= static_a & static_b[yi, xi]
     if int(ok.sum()) < MIN_PIXELS:
         return None
     if np.corrcoef(ga[ok].astype(np.float64), cv2.cvtColor(b_on_a, cv2.COLOR_RGB2GRAY)[ok])[0, 1] < MIN_CORRELATION:
@@ -143,10 +167,13 @@ def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
     return centre
 
 
-def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -> ExposureEstimate:
+def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str],
+                       masks: Iterable[np.ndarray] | None = None) -> ExposureEstimate:
     """Per-frame log gains of ``images`` (RGB float [0, 1], in playback order; each is shrunk as it comes, so a
-    long phone video is never held at full size)."""
+    long phone video is never held at full size); ``masks``: the frames' one-hot object masks, whose objects are
+    left out of the comparison."""
     small = [_small(im) for im in images]
+    static = [static_map(m, im.shape[:2]) for m, im in zip(masks, small, strict=True)] if masks is not None else None
     flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     n = len(small)
     rows, rhs = [], []
@@ -154,7 +181,7 @@ def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -
         for i in range(n - s):
             if small[i].shape != small[i + s].shape:
                 continue
-            d = pair_log_ratio(small[i], small[i + s], flow)
+            d = pair_log_ratio(small[i], small[i + s], flow, *((static[i], static[i + s]) if static else ()))
             if d is None:
                 continue
             rows.append((i, i + s))
@@ -174,7 +201,7 @@ def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str]) -
         # on a grid far finer than the estimate's accuracy (~3e-3): another machine's LAPACK may differ in the
         # least-squares fit's last bits, which would round some training pixels the other way
         gains = np.round(gains / GAIN_STEP) * GAIN_STEP
-    return ExposureEstimate(list(frame_ids), gains, len(rows), tied)
+    return ExposureEstimate(list(frame_ids), gains, len(rows), tied, masked=static is not None)
 
 
 def playback_order(ds: SceneDataset) -> list[Frame]:
@@ -185,21 +212,25 @@ def playback_order(ds: SceneDataset) -> list[Frame]:
     return list(ds.frames)
 
 
-def images_digest(ds: SceneDataset) -> str:
-    """SHA-256 over the image files of the dataset's frames in playback order (ids and bytes): what a saved
-    estimate was measured on."""
+def inputs_digest(ds: SceneDataset) -> str:
+    """SHA-256 over the image (and, with masks, mask) files of the dataset's frames in playback order: what a
+    saved estimate was measured on."""
     h = hashlib.sha256()
     for f in playback_order(ds):
         h.update(f"{f.frame_id}:".encode())
         h.update(ds.image_path(f).read_bytes())
+        if ds.has_masks:
+            h.update(mask_path(ds.root, f.frame_id).read_bytes())
     return h.hexdigest()
 
 
-def estimate_exposure(ds: SceneDataset) -> ExposureEstimate:
-    """Per-frame log gains of every frame of a dataset, train and test, in playback order."""
+def estimate_exposure(ds: SceneDataset, use_masks: bool = True) -> ExposureEstimate:
+    """Per-frame log gains of every frame of a dataset, train and test, in playback order; the movable objects
+    left out where the dataset has masks (``use_masks``)."""
     frames = playback_order(ds)
-    est = estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames])
-    est.images_sha256 = images_digest(ds)
+    masks = (ds.load_mask(f) for f in frames) if use_masks and ds.has_masks else None
+    est = estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames], masks)
+    est.inputs_sha256 = inputs_digest(ds)
     return est
 
 
@@ -210,7 +241,7 @@ def read_exposure(path: str | Path, ds: SceneDataset) -> ExposureEstimate:
     try:
         data = json.loads(path.read_text())
         gains = data["log_gains"]
-        ids, untied, digest = list(gains), set(data["untied"]), str(data["images_sha256"])
+        ids, untied, digest = list(gains), set(data["untied"]), str(data["inputs_sha256"])
         log_gains = np.array([[float(v) for v in gains[f]] for f in ids], dtype=np.float64).reshape(len(ids), 3)
         pairs = int(data["pairs"])
     except FileNotFoundError:
@@ -224,6 +255,8 @@ def read_exposure(path: str | Path, ds: SceneDataset) -> ExposureEstimate:
                 else f"it names frames {extra[:4]} the dataset does not have" if extra
                 else "its frames are in another order")
         raise InputError(path, f"measured on other frames than {ds.root}'s: {what}", remeasure)
-    if digest != images_digest(ds):
-        raise InputError(path, f"measured on other images than {ds.root}'s (their digest differs)", remeasure)
-    return ExposureEstimate(ids, log_gains, pairs, np.array([f not in untied for f in ids]), digest)
+    if digest != inputs_digest(ds):
+        raise InputError(path, f"measured on other images or masks than {ds.root}'s (their digest differs)",
+                         remeasure)
+    return ExposureEstimate(ids, log_gains, pairs, np.array([f not in untied for f in ids]), digest,
+                            bool(data.get("masked", False)))

@@ -46,6 +46,23 @@ def test_a_changing_part_of_the_scene_does_not_read_as_exposure():
     np.testing.assert_allclose(central_value(d), 0.03, atol=0.002)
 
 
+def test_a_moving_object_s_shading_is_left_out_with_its_masks(tmp_path):
+    """A door turning towards the light brightens by 2 % a frame over most of the image, under constant exposure:
+    its pixels outnumber the room's, so without masks the comparison reads the door's shading as exposure; with
+    the dataset's masks it is left out and the frames read as they were filmed."""
+    n = 12
+    frames = pan(n, np.zeros((n, 3)))
+    for i, img in enumerate(frames):  # texture columns 20-100 (62 % of the frame) are the door
+        img[:, max(16 - i, 0):96 - i] = np.round(np.clip(img[:, max(16 - i, 0):96 - i] * np.exp(0.02 * i), 0, 1)
+                                                 * 255) / 255
+    ds = write_pan_dataset(tmp_path / "ds", np.zeros((n, 3)), frames=frames, object_columns=(20, 100))
+    plain, masked = estimate_exposure(ds, use_masks=False), estimate_exposure(ds)
+    assert not plain.masked and masked.masked
+    assert masked.pairs == 11 + 9 + 3  # every pair still compared, on the room's pixels
+    assert plain.spread > 0.03  # the door's 0.02 per frame, read as the camera's
+    assert masked.spread < 0.002
+
+
 def test_frames_that_do_not_overlap_give_no_spread(tmp_path):
     """Random images (an unordered collection) tie no pair: no number rather than a made-up one."""
     ds = make_tiny_dataset(tmp_path / "ds", n_frames=6, width=64, height=48)

@@ -39,8 +39,8 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
 
     results = wf.root / "results" / "tiny"
     for rule in ("capture", "frames", "poses", "pose_compare", "labels", "states", "assemble", "exposure",
-                 "language_targets", "train_livescene", "evaluate_livescene", "sweep_livescene", "control_livescene", "export_livescene",
-                 "report"):
+                 "language_targets", "train_livescene", "evaluate_livescene", "sweep_livescene", "control_livescene",
+                 "export_livescene", "report"):
         assert (results / "benchmarks" / f"{rule}.tsv").is_file(), rule
         assert (results / "logs" / f"{rule}.log").is_file(), rule
     # the frames' exposure measured once for the scene (train.appearance: auto), and the training read it
