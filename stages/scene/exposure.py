@@ -113,8 +113,8 @@ def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow, stati
                    static_b: np.ndarray | None = None) -> np.ndarray | None:
     """Median of log(b / a) per channel over the pixels of ``a`` that ``b`` sees ([3]), or None without overlap.
 
-    ``a``, ``b``: uint8 RGB of one size; ``static_a``, ``static_b``: their ``static_map``s, when known (pixels on
-    a movable object in either frame are left out)."""
+    ``a``, ``b``: uint8 RGB of one size; ``static_a``, ``static_b``: their ``static_map``s, each when known
+    (pixels on a movable object in either frame are left out)."""
     ga, gb = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY), cv2.cvtColor(b, cv2.COLOR_RGB2GRAY)
     fwd = flow.calc(ga, gb, None)
     bwd = flow.calc(gb, ga, None)
@@ -131,10 +131,10 @@ def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow, stati
     lo, hi = CLIP
     unclipped = (a.min(-1) > lo) & (a.max(-1) < hi) & (b_on_a.min(-1) > lo) & (b_on_a.max(-1) < hi)
     ok = consistent & inside & smooth & unclipped
-    if static_a is not None and static_b is not None:
-        xi = np.clip(np.rint(mx), 0, w - 1).astype(np.intp)
-        yi = np.clip(np.rint(my), 0, h - 1).astype(np.intp)
-        ok &= static_a & static_b[yi, xi]
+    if static_a is not None:
+        ok &= static_a
+    if static_b is not None:
+        ok &= static_b[np.clip(np.rint(my), 0, h - 1).astype(np.intp), np.clip(np.rint(mx), 0, w - 1).astype(np.intp)]
     if int(ok.sum()) < MIN_PIXELS:
         return None
     if np.corrcoef(ga[ok].astype(np.float64), cv2.cvtColor(b_on_a, cv2.COLOR_RGB2GRAY)[ok])[0, 1] < MIN_CORRELATION:
@@ -168,12 +168,14 @@ def central_value(d: np.ndarray, iterations: int = 3) -> np.ndarray:
 
 
 def estimate_log_gains(images: Iterable[np.ndarray], frame_ids: Sequence[str],
-                       masks: Iterable[np.ndarray] | None = None) -> ExposureEstimate:
+                       masks: Iterable[np.ndarray | None] | None = None) -> ExposureEstimate:
     """Per-frame log gains of ``images`` (RGB float [0, 1], in playback order; each is shrunk as it comes, so a
-    long phone video is never held at full size); ``masks``: the frames' one-hot object masks, whose objects are
-    left out of the comparison."""
+    long phone video is never held at full size); ``masks``: the frames' one-hot object masks (None for a frame
+    without one), whose objects are left out of the comparison."""
     small = [_small(im) for im in images]
-    static = [static_map(m, im.shape[:2]) for m, im in zip(masks, small, strict=True)] if masks is not None else None
+    static: list[np.ndarray | None] | None = None
+    if masks is not None:
+        static = [None if m is None else static_map(m, im.shape[:2]) for m, im in zip(masks, small, strict=True)]
     flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     n = len(small)
     rows, rhs = [], []
@@ -219,8 +221,9 @@ def inputs_digest(ds: SceneDataset) -> str:
     for f in playback_order(ds):
         h.update(f"{f.frame_id}:".encode())
         h.update(ds.image_path(f).read_bytes())
-        if ds.has_masks:
-            h.update(mask_path(ds.root, f.frame_id).read_bytes())
+        mask = mask_path(ds.root, f.frame_id)
+        if ds.has_masks and mask.is_file():  # a dataset may list frames_without_masks
+            h.update(mask.read_bytes())
     return h.hexdigest()
 
 
@@ -228,7 +231,9 @@ def estimate_exposure(ds: SceneDataset, use_masks: bool = True) -> ExposureEstim
     """Per-frame log gains of every frame of a dataset, train and test, in playback order; the movable objects
     left out where the dataset has masks (``use_masks``)."""
     frames = playback_order(ds)
-    masks = (ds.load_mask(f) for f in frames) if use_masks and ds.has_masks else None
+    masks = None
+    if use_masks and ds.has_masks:
+        masks = (ds.load_mask(f) if mask_path(ds.root, f.frame_id).is_file() else None for f in frames)
     est = estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames], masks)
     est.inputs_sha256 = inputs_digest(ds)
     return est

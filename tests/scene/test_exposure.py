@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from stages.scene import InputError
+from stages.scene import InputError, read_scene, write_scene
 from stages.scene.cli import main as scene_main
 from stages.scene.exposure import (
     central_value,
@@ -17,6 +17,7 @@ from stages.scene.exposure import (
     pair_log_ratio,
     read_exposure,
 )
+from stages.scene.masks import mask_path
 from tests.conftest import make_tiny_dataset
 from tests.pan_frames import pan, write_pan_dataset
 
@@ -61,6 +62,19 @@ def test_a_moving_object_s_shading_is_left_out_with_its_masks(tmp_path):
     assert masked.pairs == 11 + 9 + 3  # every pair still compared, on the room's pixels
     assert plain.spread > 0.03  # the door's 0.02 per frame, read as the camera's
     assert masked.spread < 0.002
+
+
+def test_frames_without_a_mask_are_compared_on_what_is_known(tmp_path):
+    """A dataset may list frames_without_masks: their pairs leave out the other frame's objects only."""
+    gains = np.random.default_rng(12).normal(0.0, 0.05, (8, 3))
+    ds = write_pan_dataset(tmp_path / "ds", gains, object_columns=(40, 60))
+    ds.meta["frames_without_masks"] = ["00003"]
+    write_scene(ds, ds.root)
+    mask_path(ds.root, "00003").unlink()
+    ds = read_scene(ds.root, validate=True)
+    est = estimate_exposure(ds)
+    assert est.masked and est.tied.all() and est.pairs == 7 + 5
+    assert np.abs(est.log_gains - (gains - gains.mean(0))).max() < 0.01
 
 
 def test_frames_that_do_not_overlap_give_no_spread(tmp_path):
