@@ -163,3 +163,24 @@ def test_measured_mode_refuses_frames_it_cannot_measure(tiny_dataset, tmp_path, 
     t = Trainer(tiny_config(tiny_dataset.root, "model.appearance.mode=auto"), tmp_path / "a", device="cpu",
                 progress=False)
     assert t.appearance["mode"] == "none" and t.appearance["spread"] is None
+
+
+def test_a_mean_background_is_the_training_images_mean_colour(tmp_path, tiny_config):
+    """``background_mode: mean``: what the samples do not cover starts at the data's colour (docs/model.md,
+    "Background colour"); saved with the weights, recorded in run.json; ``fixed`` keeps the reference's white."""
+    from stages.model.trainer import mean_colour
+
+    ds = write_pan_dataset(tmp_path / "ds", np.zeros((6, 3)))
+    t = Trainer(tiny_config(ds.root, "model.sampling.background_mode=mean", steps=1), tmp_path / "mean", device="cpu",
+                progress=False)
+    images = t.train_rays.images
+    exact = images.double().mean(dim=(0, 1, 2)) / 255.0
+    torch.testing.assert_close(t.model.background, exact.float())
+    assert torch.equal(mean_colour(images), mean_colour(images.contiguous().clone()))
+    t.train()
+    recorded = json.loads((tmp_path / "mean" / "run.json").read_text())["background"]
+    assert recorded["mode"] == "mean" and recorded["rgb"] == pytest.approx(exact.tolist(), abs=1e-6)
+    torch.testing.assert_close(load_run(tmp_path / "mean").model.background, exact.float())
+    fixed = Trainer(tiny_config(ds.root, "model.sampling.background_mode=fixed", steps=1), tmp_path / "fixed",
+                    device="cpu", progress=False)
+    assert fixed.model.background.tolist() == [1.0, 1.0, 1.0]
