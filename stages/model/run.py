@@ -55,7 +55,8 @@ class LoadedRun:
         self.model.load_state_dict(payload["state_dict"])
         self.model.to(self.device).eval()
         self.norm = SceneNormalization.from_dict(payload["normalization"])
-        self.frame_states = np.asarray(payload["frame_states"], dtype=np.float64).reshape(-1, self.info.n_objects)
+        frame_states = payload["frame_states"]  # [frames][objects]; a room without objects has empty rows
+        self.frame_states = np.asarray(frame_states, dtype=np.float64).reshape(len(frame_states), self.info.n_objects)
         self.frame_ids = list(payload.get("frame_ids", []))
         self.step = int(payload["step"])
         self.language_encoder = payload.get("language_encoder")

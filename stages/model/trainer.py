@@ -202,6 +202,11 @@ class Trainer:
         mode = cfg.model.state.mode
         if mode not in ("given", "learned"):
             raise InputError("--state-mode", f"unknown state mode {mode!r}", "use given or learned")
+        if mode == "learned" and not self.ds.objects:
+            # a room filmed without masks or key frames has no object whose state could be learned: it trains as
+            # a static field (the resolved mode is what the run's config records, as with appearance auto)
+            print(f"{self.ds.root}: no objects, so no states to learn: state mode given", file=sys.stderr)
+            mode = cfg.model.state.mode = "given"
         self.language = LanguageTargets.read(cfg.language_targets, self.ds.objects) if cfg.language_targets else None
         seed_everything(cfg.seed)
         self.norm = SceneNormalization.from_dataset(self.ds)

@@ -99,6 +99,29 @@ def test_learned_state_mode_supervises_key_frames(tiny_dataset, tmp_path, tiny_c
     assert states.shape == (6, 3) and np.all((states > 0) & (states < 1))
 
 
+def test_a_room_without_objects_trains_as_a_static_field(tiny_dataset, tmp_path, tiny_config):
+    """A video filmed without masks or key frames (the workflow asks for learned states when a scene has no key
+    frames): no object, so no state to learn; it trains as given and renders."""
+    import shutil
+
+    from stages.scene import read_scene, write_scene
+
+    ds = tiny_dataset
+    shutil.rmtree(ds.root / "masks")
+    (ds.root / "mapping.yaml").unlink(missing_ok=True)
+    ds.objects, ds.object_ids, ds.key_frames, ds.prompts = [], [], {}, {}
+    for f in ds.frames:
+        f.state = None
+    write_scene(ds, ds.root)
+    assert read_scene(ds.root).objects == []
+    out = tmp_path / "static"
+    Trainer(tiny_config(ds.root, "model.state.mode=learned", steps=2), out, device="cpu", progress=False).train()
+    assert json.loads((out / "run.json").read_text())["state_mode"] == "given"
+    run = load_run(out)
+    frame = ds.frames[0]
+    assert np.isfinite(run.render(ds.camera, frame.c2w, {})["rgb"]).all()
+
+
 def test_language_targets_train_and_render(tiny_dataset, tmp_path, tiny_config):
     rng = np.random.default_rng(0)
     emb = rng.normal(size=(3, 2, 8)).astype(np.float32)

@@ -98,7 +98,7 @@ class LiveSceneModel(nn.Module):
             train[info.train_frames or slice(None)] = True
             self.register_buffer("appearance_train", train)
         self.register_buffer("background", torch.tensor(config.sampling.background, dtype=torch.float32))
-        key_states = torch.tensor(info.key_states, dtype=torch.float32).reshape(-1, alpha)
+        key_states = torch.tensor(info.key_states, dtype=torch.float32).reshape(len(info.key_times), alpha)
         self.register_buffer("key_times", torch.tensor(info.key_times, dtype=torch.float32))
         self.register_buffer("key_states", key_states)
 
@@ -141,7 +141,7 @@ class LiveSceneModel(nn.Module):
         mids = samples.mids
         pos = (rays.origins[:, None, :] + rays.directions[:, None, :] * mids[..., None]).reshape(-1, 3)
         pos = pos.clamp(-1.0, 1.0)
-        st = states[:, None, :].expand(n_rays, n_samp, states.shape[-1]).reshape(-1, states.shape[-1])
+        st = states[:, None, :].expand(n_rays, n_samp, states.shape[-1]).reshape(n_rays * n_samp, states.shape[-1])
         times = rays.times if rays.times is not None else torch.zeros(n_rays, device=pos.device)
         t = times[:, None].expand(n_rays, n_samp).reshape(-1)
         # one set of plane grids per level: the spatial xy/xz/yz grid serves the probability tri-plane and every
