@@ -190,6 +190,8 @@ def export_run(run: Renderable, dataset: SceneDataset, combos: Sequence[Mapping[
                          f"(objects: {run.objects})",
                          "export a LiveScene run trained on a dataset with masks, or leave out --objects")
     full = [full_state(dict(c), run.objects) for c in combos] or [full_state({}, run.objects)]
+    if not run.objects:  # a room without objects has one state: "all=0" and "all=1" both name it
+        full = full[:1]
     slugs = [state_slug(s) for s in full]
     if len(set(slugs)) != len(slugs):
         raise InputError("--states", "the same state combination is given twice", "give each combination once")

@@ -120,6 +120,14 @@ def test_a_room_without_objects_trains_as_a_static_field(tiny_dataset, tmp_path,
     run = load_run(out)
     frame = ds.frames[0]
     assert np.isfinite(run.render(ds.camera, frame.c2w, {})["rgb"]).all()
+    # the workflow's export states "all=0" and "all=1" name the room's one state: exported once
+    from stages.export.exporter import ExportOptions, export_run
+    from stages.export.state_spec import parse_state_string
+
+    combos = [parse_state_string(t, run.objects) for t in ("all=0", "all=1")]
+    exported = export_run(run, read_scene(ds.root), combos, tmp_path / "export", ExportOptions(views=2, resolution=32),
+                          progress=False)
+    assert [e["states"] for e in exported["exports"]] == [{}]
 
 
 def test_language_targets_train_and_render(tiny_dataset, tmp_path, tiny_config):

@@ -75,6 +75,7 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     unseen = html.split('<section id="unseen">')[1].split("</section>")[0]
     assert unseen.count("2 of 3 poses: at 3, this room's objects would take more than the evaluation's budget of "
                         "4 renders") == 1  # one sentence for both methods
+    assert "nothing to test here" not in unseen
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG
@@ -83,6 +84,21 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     assert "stability.run is false" in html  # absent stability summary: the page says why
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["methods"]["conerf"]["psnr"] == 21.0
+
+
+def test_a_room_with_no_unseen_combination_says_why(tmp_path, tiny_dataset):
+    """One object: every state it takes is a training state, so no candidate vector is unseen; the section says so
+    instead of showing an empty table."""
+    results = make_fake_results(tmp_path, tiny_dataset.root)
+    for metrics in results.glob("**/metrics.json"):
+        m = json.loads(metrics.read_text())
+        u = m["unseen_combinations"]
+        u["combinations"] = [{"unseen": False}] * 3
+        u["records"], u["psnr"], u["psnr_moved"], u["ssim"] = [], {"mean": None}, {"mean": None}, {"mean": None}
+        metrics.write_text(json.dumps(m))
+    html = render(tmp_path, fake_inputs(results, tiny_dataset.root)).read_text()
+    unseen = html.split('<section id="unseen">')[1].split("</section>")[0]
+    assert "No candidate state vector is unseen" in unseen and "nothing to test here" in unseen
 
 
 def test_page_without_evaluations(tmp_path, tiny_dataset):
