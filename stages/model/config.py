@@ -112,12 +112,12 @@ class SamplingConfig:
     """Nearest sample distance, in normalised scene units."""
     background: list[float] = dataclasses.field(default_factory=lambda: [1.0, 1.0, 1.0])
     """Colour behind the last sample (reference: white), with ``background_mode: fixed``."""
-    background_mode: Literal["fixed", "mean"] = "fixed"
-    """``fixed``: ``background`` (the reference). ``mean``: the training images' mean colour, computed when
-    training starts and saved with the weights. A model starts half transparent, so against white its first
-    renders are far brighter than a dark room; the first steps then push the colour head into saturation at
-    black, and the room is fitted as grey opacity over the white background (docs/model.md, "Background
-    colour")."""
+    background_mode: Literal["fixed", "last_sample"] = "fixed"
+    """``fixed``: ``background`` (the reference). ``last_sample``: the colour of each ray's last sample (nerfacto's
+    default for real captures), so a ray always ends on an opaque colour of the model's own. A model starts half
+    transparent, so against white its first renders are far brighter than a dark room; the first steps then push
+    the colour head into saturation at black, and the room is fitted as grey opacity over the white background
+    (docs/model.md, "Background colour")."""
     histogram_padding: float = 0.01
     """Added to the weights before PDF sampling so no interval has zero probability."""
 

@@ -155,13 +155,6 @@ def peak_memory_mib(device: torch.device) -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
 
 
-def mean_colour(images: torch.Tensor) -> torch.Tensor:
-    """Mean RGB [3] in [0, 1] of uint8 images [F, H, W, 3], from exact integer sums (one frame at a time: a
-    phone video's frames are not copied to int64 at once), so it does not depend on the thread count."""
-    total = sum(frame.sum(dim=(0, 1), dtype=torch.int64) for frame in images)
-    return (total.double() / (255.0 * images[0, ..., 0].numel() * len(images))).float()
-
-
 def psnr_of(mse: float) -> float:
     return -10.0 * math.log10(max(mse, 1e-12))
 
@@ -227,8 +220,6 @@ class Trainer:
             raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
                              "annotate key frames, or set --set model.state.key_frame_every=N")
         self.model = build_model(cfg.method, cfg.model, self.info).to(self.device)
-        if cfg.model.sampling.background_mode == "mean":
-            self.model.background.copy_(mean_colour(self.train_rays.images))
         if cfg.train.compile:
             compile_fields(self.model)
         if self.language is not None:
@@ -623,8 +614,7 @@ class Trainer:
             "objects": list(self.ds.objects),
             "state_mode": cfg.model.state.mode,
             "appearance": self.appearance,
-            "background": {"mode": self.config.model.sampling.background_mode,
-                           "rgb": [round(float(v), 6) for v in self.model.background.cpu()]},
+            "background": self.config.model.sampling.background_mode,
             "language": bool(self.language),
             "normalization": self.norm.to_dict(),
             "eval_psnr": eval_psnr,

@@ -165,22 +165,31 @@ def test_measured_mode_refuses_frames_it_cannot_measure(tiny_dataset, tmp_path, 
     assert t.appearance["mode"] == "none" and t.appearance["spread"] is None
 
 
-def test_a_mean_background_is_the_training_images_mean_colour(tmp_path, tiny_config):
-    """``background_mode: mean``: what the samples do not cover starts at the data's colour (docs/model.md,
-    "Background colour"); saved with the weights, recorded in run.json; ``fixed`` keeps the reference's white."""
-    from stages.model.trainer import mean_colour
+@pytest.mark.parametrize("mode", ["fixed", "last_sample"])
+@pytest.mark.parametrize("training", [True, False])
+def test_what_a_ray_does_not_cover_shows_the_background(tiny_overrides, mode, training):
+    """``last_sample``: the colour of each ray's last sample shows behind it (nerfacto's default), in training and
+    in the render path, which therefore colours that sample even when its weight is under the floor; ``fixed``:
+    the reference's white (docs/model.md, "Background colour")."""
+    cfg = load_config("cpu-demo", [*tiny_overrides, f"model.sampling.background_mode={mode}"])
+    torch.manual_seed(0)
+    model = build_model("livescene", cfg.model, INFO).train(training)
+    final: dict = {}
+    level = model._level
 
-    ds = write_pan_dataset(tmp_path / "ds", np.zeros((6, 3)))
-    t = Trainer(tiny_config(ds.root, "model.sampling.background_mode=mean", steps=1), tmp_path / "mean", device="cpu",
-                progress=False)
-    images = t.train_rays.images
-    exact = images.double().mean(dim=(0, 1, 2)) / 255.0
-    torch.testing.assert_close(t.model.background, exact.float())
-    assert torch.equal(mean_colour(images), mean_colour(images.contiguous().clone()))
-    t.train()
-    recorded = json.loads((tmp_path / "mean" / "run.json").read_text())["background"]
-    assert recorded["mode"] == "mean" and recorded["rgb"] == pytest.approx(exact.tolist(), abs=1e-6)
-    torch.testing.assert_close(load_run(tmp_path / "mean").model.background, exact.float())
-    fixed = Trainer(tiny_config(ds.root, "model.sampling.background_mode=fixed", steps=1), tmp_path / "fixed",
-                    device="cpu", progress=False)
-    assert fixed.model.background.tolist() == [1.0, 1.0, 1.0]
+    def spy(*args, **kwargs):
+        out = level(*args, **kwargs)
+        if kwargs.get("final"):
+            final.update(out)
+        return out
+
+    model._level = spy
+    with torch.set_grad_enabled(training):
+        out = model(_rays(64), outputs=("rgb",)) if not training else model(_rays(64))
+    w, rgb = final["weights"].detach(), final["rgb"].detach()
+    behind = rgb[:, -1, :] if mode == "last_sample" else torch.ones(3)
+    if mode == "last_sample":
+        assert (rgb[:, -1, :] > 0).all()  # computed for every ray, visible or not
+    expected = (w[..., None] * rgb).sum(1) + (1.0 - w.sum(-1, keepdim=True)) * behind
+    torch.testing.assert_close(out["rgb"].detach(), expected)
+    assert (1.0 - w.sum(-1)).max() > 0.05  # the check sees the background: some rays are far from opaque

@@ -162,7 +162,10 @@ class LiveSceneModel(nn.Module):
                 if self.training:
                     rgb = self.field.color(geo, dirs.reshape(-1, 3))
                 else:  # rendering: no colour for samples the image cannot see (error <= samples x floor per pixel)
-                    keep = (weights.reshape(-1) > RENDER_WEIGHT_FLOOR).nonzero()[:, 0]
+                    visible = weights > RENDER_WEIGHT_FLOOR
+                    if self.config.sampling.background_mode == "last_sample":
+                        visible[:, -1] = True  # its colour shows behind the ray
+                    keep = visible.reshape(-1).nonzero()[:, 0]
                     rgb = torch.zeros(n_rays * n_samp, 3, device=geo.device)
                     rgb[keep] = self.field.color(geo[keep], dirs.reshape(-1, 3)[keep])
                 out["rgb"] = rgb.view(n_rays, n_samp, 3)
@@ -226,7 +229,8 @@ class LiveSceneModel(nn.Module):
         w = final["weights"]
         out: dict = {"states": states}
         if "rgb" in outputs:
-            out["rgb"] = render_rgb(w, final["rgb"], self.background)
+            last = self.config.sampling.background_mode == "last_sample"
+            out["rgb"] = render_rgb(w, final["rgb"], final["rgb"][:, -1, :] if last else self.background)
         if "depth" in outputs:
             out["depth"] = render_depth(w, samples.mids, rays.nears, rays.fars)
         if "accumulation" in outputs:
