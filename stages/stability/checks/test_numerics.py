@@ -165,7 +165,8 @@ def test_objects_touching_box(ctx: CaseContext, outcome: Outcome) -> None:
 
 def test_rays_missing_the_box(ctx: CaseContext, outcome: Outcome) -> None:
     """rays that miss the scene box, graze a face, run along an axis or start inside it get finite near/far,
-    render the background (accumulation ~0 for misses) and give finite loss and gradients"""
+    render what is behind them (accumulation ~0 for misses: the configured background, or with
+    model.sampling.background_mode last_sample their last sample's colour) and give finite loss and gradients"""
     root = ctx.folder("rays-miss")
     ds = hand_built_dataset(root / "ds")
     trainer = make_trainer(ds.root, root / "run", steps=ctx.steps)
@@ -181,14 +182,27 @@ def test_rays_missing_the_box(ctx: CaseContext, outcome: Outcome) -> None:
     n = len(origins)
     rays = RayBundle(origins, dirs, nears, fars, torch.rand(n, 2), torch.zeros(n))
     model = trainer.model
+    final: dict = {}
+    level = model._level
+
+    def keep_final(*args, **kwargs):  # the last level's per-sample colours: what last_sample shows behind a ray
+        result = level(*args, **kwargs)
+        if kwargs.get("final"):
+            final.update(result)
+        return result
+
+    model._level = keep_final
     out = model(rays, step=0, generator=torch.Generator().manual_seed(0))
+    del model._level
     loss = (out["rgb"] - 0.5).square().mean() + out["logits"].square().mean() * 1e-3
     loss.backward()
     assert bool(torch.isfinite(loss)), "loss on rays missing the box is not finite"
     bad = nonfinite_grads(model)
     assert not bad, f"non-finite gradients from rays missing the box: {bad[:3]}"
     acc = out["accumulation"].detach()
-    bg_err = float((out["rgb"].detach()[misses] - model.background).abs().max())
+    last_sample = trainer.config.model.sampling.background_mode == "last_sample"
+    behind = final["rgb"].detach()[:, -1, :][misses] if last_sample else model.background
+    bg_err = float((out["rgb"].detach()[misses] - behind).abs().max())
     assert float(acc[misses].max()) < 1e-2, f"rays that miss the box accumulate {float(acc[misses].max()):.3g}"
     assert bg_err < 1e-2, f"rays that miss the box do not show the background (error {bg_err:.3g})"
     outcome.record(f"{int(misses.sum())} misses: accumulation <= {float(acc[misses].max()):.1e}, background error "
