@@ -16,6 +16,9 @@ TINY_RUN = [
     "train.checkpoint_every=100", "train.render_chunk=1024", "train.threads=1", "train.max_steps=30",
     # every sample follows the state of its most probable object (the preset rejects weak ones: after 4 steps all)
     "model.probability.rejection_threshold=0",
+    # after 30 steps the rays are still mostly transparent: what a state changes shows against a fixed background,
+    # not behind the preset's last sample (whose colour the state barely moves)
+    "model.sampling.background_mode=fixed",
 ]
 
 
