@@ -49,16 +49,6 @@ def state_vector(ds: SceneDataset, frame: Frame) -> np.ndarray:
     return out
 
 
-def _mask_or_none(ds: SceneDataset, frame: Frame) -> np.ndarray | None:
-    """The frame's one-hot mask, or None where the dataset says it has none."""
-    try:
-        return ds.load_mask(frame)
-    except SceneError:
-        if frame.frame_id in set(map(str, ds.meta.get("frames_without_masks", []))):
-            return None
-        raise
-
-
 def label_maps(ds: SceneDataset, frames: list[Frame]) -> np.ndarray:
     """int8 label maps [F, H, W] of ``frames``: object index, alpha = background, -1 = no label; a frame without
     a mask, or with an object's mask too small to trust (``unreliable_masks`` over the dataset's frames), is all -1.
@@ -74,7 +64,7 @@ def label_maps(ds: SceneDataset, frames: list[Frame]) -> np.ndarray:
         rows.setdefault(f.frame_id, []).append(k)
     ids, counts = [], []
     for f in ds.frames:
-        mask = _mask_or_none(ds, f)
+        mask = ds.load_mask_or_none(f)
         if mask is None:
             continue
         ids.append(f.frame_id)

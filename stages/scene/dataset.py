@@ -132,6 +132,15 @@ class SceneDataset:
         cam = self.camera_of(frame)
         return read_mask(self.root, frame.frame_id, cam.height, cam.width, self.n_objects)
 
+    def load_mask_or_none(self, frame: Frame) -> np.ndarray | None:
+        """The frame's one-hot mask, or None where the dataset says it has none (``frames_without_masks``)."""
+        try:
+            return self.load_mask(frame)
+        except SceneError:
+            if frame.frame_id in set(map(str, self.meta.get("frames_without_masks", []))):
+                return None
+            raise
+
     def frames_in(self, split: str) -> list[Frame]:
         return [f for f in self.frames if (f.split or "train") == split]
 

@@ -231,9 +231,7 @@ def estimate_exposure(ds: SceneDataset, use_masks: bool = True) -> ExposureEstim
     """Per-frame log gains of every frame of a dataset, train and test, in playback order; the movable objects
     left out where the dataset has masks (``use_masks``)."""
     frames = playback_order(ds)
-    masks = None
-    if use_masks and ds.has_masks:
-        masks = (ds.load_mask(f) if mask_path(ds.root, f.frame_id).is_file() else None for f in frames)
+    masks = (ds.load_mask_or_none(f) for f in frames) if use_masks and ds.has_masks else None
     est = estimate_log_gains((ds.load_image(f) for f in frames), [f.frame_id for f in frames], masks)
     est.inputs_sha256 = inputs_digest(ds)
     return est

@@ -98,6 +98,8 @@ class LiveSceneModel(nn.Module):
             train[info.train_frames or slice(None)] = True
             self.register_buffer("appearance_train", train)
         self.register_buffer("background", torch.tensor(config.sampling.background, dtype=torch.float32))
+        self.last_sample_behind = config.sampling.background_mode == "last_sample"
+        """What a ray does not cover shows its last sample's colour instead of ``background``."""
         key_states = torch.tensor(info.key_states, dtype=torch.float32).reshape(len(info.key_times), alpha)
         self.register_buffer("key_times", torch.tensor(info.key_times, dtype=torch.float32))
         self.register_buffer("key_states", key_states)
@@ -163,7 +165,7 @@ class LiveSceneModel(nn.Module):
                     rgb = self.field.color(geo, dirs.reshape(-1, 3))
                 else:  # rendering: no colour for samples the image cannot see (error <= samples x floor per pixel)
                     visible = weights > RENDER_WEIGHT_FLOOR
-                    if self.config.sampling.background_mode == "last_sample":
+                    if self.last_sample_behind:
                         visible[:, -1] = True  # its colour shows behind the ray
                     keep = visible.reshape(-1).nonzero()[:, 0]
                     rgb = torch.zeros(n_rays * n_samp, 3, device=geo.device)
@@ -229,8 +231,8 @@ class LiveSceneModel(nn.Module):
         w = final["weights"]
         out: dict = {"states": states}
         if "rgb" in outputs:
-            last = self.config.sampling.background_mode == "last_sample"
-            out["rgb"] = render_rgb(w, final["rgb"], final["rgb"][:, -1, :] if last else self.background)
+            behind = final["rgb"][:, -1, :] if self.last_sample_behind else self.background
+            out["rgb"] = render_rgb(w, final["rgb"], behind)
         if "depth" in outputs:
             out["depth"] = render_depth(w, samples.mids, rays.nears, rays.fars)
         if "accumulation" in outputs:
