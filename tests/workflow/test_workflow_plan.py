@@ -140,7 +140,9 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
         {"scene": "model", "source": "video", "path": video, "poses": "colmap:" + str(tmp_path), "masks": "no",
          "key_frames": "no", "names": "no"},
         {"scene": "nomodel", "source": "images", "path": tmp_path / "shots", "poses": "colmap:/no/such/sparse",
-         "masks": "no", "key_frames": "no", "names": "no"}])
+         "masks": "no", "key_frames": "no", "names": "no"},
+        {"scene": "keyless", "source": "images", "path": tmp_path / "shots", "masks": tmp_path / "shots",
+         "key_frames": "no", "names": "no"}])
     run = workflow_copy.snakemake("-n", "--cores", "1")
     assert run.code != 0
     assert "line 2 (scene 'none'): column 'truth': 'none' is not 'yes', 'no' or a capture folder" in run.output
@@ -151,6 +153,9 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
     assert "line 5 (scene 'model'): column 'poses': a COLMAP model is matched to an image folder" in run.output
     assert "line 6 (scene 'nomodel'): column 'poses': COLMAP model folder '/no/such/sparse' does not exist" \
         in run.output
+    assert "line 7 (scene 'keyless'): column 'key_frames': the masks make objects, but without key frames" \
+        in run.output
+    assert "line 2 (scene 'none'): column 'key_frames'" not in run.output  # no masks: a static room
     assert "MissingInputException" not in run.output
 
 
@@ -180,9 +185,10 @@ def test_mask_file_reaches_colmap_through_the_labels_stage(workflow_copy, tmp_pa
     video.write_bytes(b"")  # a dry run only needs the paths to exist
     folder.mkdir()
     coco.write_text("{}")
-    names = tmp_path / "mapping.yaml"
+    names, keys = tmp_path / "mapping.yaml", tmp_path / "keys.yaml"
     names.write_text("{1: fridge}")
-    row = {"source": "video", "path": video, "poses": "estimate", "key_frames": "no", "names": names,
+    keys.write_text("{frame_00000: {fridge: 0.0}}")
+    row = {"source": "video", "path": video, "poses": "estimate", "key_frames": keys, "names": names,
            "truth": "no", "methods": "livescene"}
     workflow_copy.write_scenes([{"scene": "folder", "masks": folder, **row}, {"scene": "file", "masks": coco, **row}])
     plan = workflow_copy.dry_run()

@@ -72,6 +72,13 @@ def _row_problems(record):
         elif value not in ("", "yes", "no") and not Path(value).exists():
             problems.append(f"column {column!r}: {value!r} does not exist; fix: give an existing file or folder, "
                             "or write 'no'")
+    # masks make objects; their states come only from key frames (the states stage, or learned between key
+    # frames): refused here rather than by the trainer after frames, COLMAP and labels have run
+    framed = kind in ("video", "images") or (kind == "synthetic" and poses != "given")
+    if framed and record.get("masks", "yes") != "no" and record.get("key_frames", "yes") == "no":
+        problems.append("column 'key_frames': the masks make objects, but without key frames nothing gives their "
+                        "states (docs/labels-states.md); fix: give the key-frame file (key_frame_value.yaml, "
+                        "annotations.yml or CSV), or write 'no' in column 'masks' to train the room as a static field")
     truth = record.get("truth", "no")
     if truth == "yes" and kind != "synthetic":
         problems.append(f"column 'truth': 'yes' means a synthetic capture's own truth; for a {kind} source write "
