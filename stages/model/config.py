@@ -185,6 +185,10 @@ class LossWeights:
     low-weight sample with an extreme logit can outvote the surface), ``probabilities`` the rendered
     per-sample probabilities, ``samples`` every sample's own focal CE weighted by its rendering weight,
     ``both`` the logits and the probabilities forms summed (docs/method.md section 5)."""
+    mask_levels: Literal["all", "final"] = "all"
+    """Which sampling levels the mask losses (focal, repulsion) supervise: ``all`` (the reference) or ``final``
+    only. With ``final`` the probability field runs without gradient at the proposal levels, where its argmax only
+    places the k coordinate (docs/method.md section 5)."""
     repulsion: float = 1e-3
     """Repulsion of rendered logits of ray pairs with different labels."""
     repulsion_margin: float = 10.0

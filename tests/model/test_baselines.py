@@ -18,6 +18,7 @@ from stages.compare.method_comparison import (
     params_vs_objects,
 )
 from stages.model import Trainer, build_model, load_config, load_run
+from stages.model.fields import ProbabilityField
 from stages.model.methods import SceneInfo
 from stages.model.methods.mk_planes import mk_planes_pairs, mk_planes_star_pairs
 from stages.model.ray_dataset import RayBatch
@@ -121,8 +122,10 @@ def test_probability_field_runs_at_every_level_only_where_the_field_reads_it(met
     out = model(rays, step=300, generator=torch.Generator().manual_seed(0))
     levels = len(model.proposal_fields) + 1
     assert len(calls) == (levels if reads else 1)
-    # the mask losses supervise every level whose logits exist: all for LiveScene and CoNeRF, the final one otherwise
-    assert len(out["level_logits"]) == (levels if reads else 1)
+    # the mask losses supervise every level whose logits exist (all for LiveScene and CoNeRF, the final one
+    # otherwise), unless ``mask_levels`` keeps them to the final level
+    every = reads and model.config.losses.mask_levels == "all"
+    assert len(out["level_logits"]) == (levels if every else 1)
     assert set(model.loss_dict(out, RayBatch(rays, torch.rand(16, 3), torch.zeros(16, dtype=torch.long),
                                                torch.zeros(16, dtype=torch.long)), 300)) >= {
         "rgb", "focal_mask"}
@@ -133,10 +136,45 @@ def test_probability_field_runs_at_every_level_only_where_the_field_reads_it(met
         assert torch.equal(out["rgb"], full["rgb"]) and torch.equal(out["logits"], full["logits"])
 
 
+@pytest.mark.parametrize("form", ["logits", "both", "samples"])
+def test_mask_levels_final_supervises_the_final_level_and_renders_the_same(form, tiny_overrides, monkeypatch):
+    """``losses.mask_levels: final``: the proposal levels still place k by the argmax, from logits computed
+    without a graph, and only the final level's logits reach the mask losses; every rendered value is unchanged."""
+    forward = ProbabilityField.forward
+
+    def run(levels):
+        cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]",
+                                       f"model.losses.mask_levels={levels}", f"model.losses.focal_mask_on={form}"])
+        torch.manual_seed(0)
+        model = build_model("livescene", cfg.model, _info(2)).train()
+        logits = []
+        monkeypatch.setattr(ProbabilityField, "forward",
+                            lambda self, *a, **k: logits.append(forward(self, *a, **k)) or logits[-1])
+        out = model(_rays(16, 2), step=300, generator=torch.Generator().manual_seed(0))
+        return model, out, logits
+
+    _, every, every_logits = run("all")
+    model, final, final_logits = run("final")
+    levels = len(model.proposal_fields) + 1
+    assert len(final_logits) == len(every_logits) == levels  # the k-projection still reads every level
+    assert [lg.requires_grad for lg in final_logits] == [False] * (levels - 1) + [True]
+    assert all(lg.requires_grad for lg in every_logits)
+    for key in ("rgb", "logits", "depth"):
+        assert torch.equal(every[key], final[key])
+    for key in ("level_logits", "level_probs", "level_samples"):
+        if key in every:
+            assert len(every[key]) == levels and len(final[key]) == 1
+    labels = torch.randint(0, 3, (16,), generator=torch.Generator().manual_seed(1))
+    terms = model.loss_dict(final, RayBatch(_rays(16, 2), torch.rand(16, 3), labels, torch.zeros(16, dtype=torch.long)),
+                            300)
+    (terms["focal_mask"] + terms["repulsion"]).backward()
+    assert model.probability_field.decoder[-1].weight.grad.abs().sum() > 0
+
+
 @pytest.mark.parametrize(("mode", "key"), [("probabilities", "level_probs"), ("samples", "level_samples")])
 def test_focal_mask_forms_supervise_every_level(mode, key, tiny_overrides, monkeypatch):
     """``losses.focal_mask_on`` other than logits: every level feeds that form, and ``probs`` is what it trains."""
-    cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]",
+    cfg = load_config("cpu-demo", [*tiny_overrides, "model.field.scales=[1,2]", "model.losses.mask_levels=all",
                                    f"model.losses.focal_mask_on={mode}"]).model
     model = build_model("livescene", cfg, _info(2)).train()
     rays = _rays(16, 2)

@@ -49,5 +49,13 @@ def test_livescene_alone_adds_the_rendered_probabilities_to_its_mask_loss_at_cpu
         assert load_config("cpu-demo", method=method).model.losses.focal_mask_on == "logits"
 
 
+def test_livescene_alone_keeps_its_mask_losses_to_the_final_level_at_cpu_demo():
+    """LiveScene's cpu-demo overlay (docs/model.md, "The mask losses at the final level")."""
+    assert load_config("cpu-demo", method="livescene").model.losses.mask_levels == "final"
+    assert load_config("gpu-paper", method="livescene").model.losses.mask_levels == "all"  # the reference
+    for method in ("mk-planes", "conerf"):
+        assert load_config("cpu-demo", method=method).model.losses.mask_levels == "all"
+
+
 def test_a_config_without_a_method_is_the_default_methods_with_its_overlay():
     assert load_config("cpu-demo").to_dict() == load_config("cpu-demo", method="livescene").to_dict()

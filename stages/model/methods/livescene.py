@@ -152,9 +152,12 @@ class LiveSceneModel(nn.Module):
         out: dict[str, torch.Tensor] = {}
         logits = None
         if final or self.field_reads_probabilities:
+            supervised = final or self.config.losses.mask_levels == "all"
             # the tri-plane is sampled at box-normalised positions (the reference code forgets to normalise)
-            logits = self.probability_field(pos, states, grids)
-            out["logits"] = logits.view(n_rays, n_samp, -1)
+            with torch.set_grad_enabled(supervised and torch.is_grad_enabled()):
+                logits = self.probability_field(pos, states, grids)
+            if supervised:  # the mask losses read these; otherwise the argmax below is their only use
+                out["logits"] = logits.view(n_rays, n_samp, -1)
         coords = self.coordinates(pos, st, logits, t)
         if final:
             sigma, geo = self.field.density(coords, grids)
