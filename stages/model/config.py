@@ -179,7 +179,7 @@ class LossWeights:
     k_smoothness_proposal: float = 1e-3
     """Second-difference smoothness along k, proposal fields."""
     focal_mask: float = 1e-3
-    """Focal cross-entropy of rendered logits against mask labels, every level."""
+    """Focal cross-entropy of rendered logits against mask labels, at the levels ``mask_levels`` names."""
     focal_mask_on: Literal["logits", "probabilities", "samples", "both"] = "logits"
     """What the focal mask loss judges along a ray: ``logits`` the rendered logits (the reference; one
     low-weight sample with an extreme logit can outvote the surface), ``probabilities`` the rendered

@@ -250,7 +250,7 @@ class LiveSceneModel(nn.Module):
         if training:
             out["proposal"] = [(s, lv["weights"]) for s, lv in levels]
             out["final"] = (samples, w)
-            # the mask losses supervise every level whose logits were computed
+            # the mask losses supervise every level whose logits were kept (model.losses.mask_levels)
             out["level_logits"] = [render_features(lv["weights"].detach(), lv["logits"])
                                    for _, lv in levels if "logits" in lv]
             out["level_logits"].append(out["logits"])
