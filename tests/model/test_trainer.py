@@ -63,6 +63,7 @@ def test_run_files_log_columns_and_run_json(trained_run):
     for col in ("wall_s", "step", "loss", "rgb", "interlevel", "distortion", "plane_tv", "focal_mask", "repulsion",
                 "l1_k_planes", "k_smoothness", "eval_psnr"):
         assert col in rows[0]
+    assert not {"focal_mask_on", "mask_levels", "repulsion_margin"} & set(rows[0])  # settings, not loss terms
     assert rows[1]["eval_psnr"] and np.isfinite(float(rows[1]["eval_psnr"]))
     assert float(rows[-1]["wall_s"]) >= float(rows[0]["wall_s"])
     assert (trained_run / "config.yaml").is_file()
