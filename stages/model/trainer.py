@@ -46,7 +46,8 @@ from .scene_normalization import SceneNormalization
 MODEL_FORMAT = 2
 """2: K-Planes planes stored stacked per shape (``plane_groups.N``, was ``planes.N``)."""
 # the weights of loss terms; the forms (focal_mask_on, mask_levels) and the hinge's margin are settings, not terms
-LOSS_COLUMNS = [f.name for f in dataclasses.fields(LossWeights) if f.type in (float, "float") and f.name != "repulsion_margin"]
+LOSS_COLUMNS = [f.name for f in dataclasses.fields(LossWeights)
+                if f.type in (float, "float") and f.name != "repulsion_margin"]
 LOG_COLUMNS = ["wall_s", "step", "lr", "loss", *LOSS_COLUMNS, "eval_psnr", "eval_miou", "rays_per_s"]
 
 
