@@ -30,7 +30,7 @@ def imported_model(scene):
 
 def from_frames(scene):
     """True when the dataset is assembled here from extracted frames (poses estimated or imported)."""
-    return source(scene) != "dataset" and row(scene)["poses"] != "given"
+    return frames_assembled(source(scene), row(scene)["poses"])
 
 
 def has_truth(scene):

@@ -43,6 +43,12 @@ def _check_config(cfg):
 ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
 
 
+def frames_assembled(kind, poses):
+    """True when a scene's dataset is assembled here from extracted frames (poses estimated or imported), so
+    labels and states come from the sheet's masks and key frames (the plan's ``from_frames``)."""
+    return kind != "dataset" and poses != "given"
+
+
 def _row_problems(record):
     """What the schema cannot say about one row: which values suit its source, and that paths exist."""
     kind, poses = record["source"], record.get("poses", "estimate")
@@ -74,8 +80,7 @@ def _row_problems(record):
                             "or write 'no'")
     # masks make objects; their states come only from key frames (the states stage, or learned between key
     # frames): refused here rather than by the trainer after frames, COLMAP and labels have run
-    framed = kind in ("video", "images") or (kind == "synthetic" and poses != "given")
-    if framed and record.get("masks", "yes") != "no" and record.get("key_frames", "yes") == "no":
+    if frames_assembled(kind, poses) and record.get("masks", "yes") != "no" and record.get("key_frames", "yes") == "no":
         problems.append("column 'key_frames': the masks make objects, but without key frames nothing gives their "
                         "states (docs/labels-states.md); fix: give the key-frame file (key_frame_value.yaml, "
                         "annotations.yml or CSV), or write 'no' in column 'masks' to train the room as a static field")
