@@ -43,6 +43,9 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     p.add_argument("--grounding-threshold", type=float, default=0.5, help="relevancy threshold of the grounding IoU")
     p.add_argument("--scale", type=float, default=1.0,
                    help="render and compare at this fraction of the image size (e.g. 0.5 on a CPU: 4x fewer rays)")
+    p.add_argument("--max-side", type=int, default=0,
+                   help="render and compare at the dataset's size divided by the smallest integer factor that brings "
+                        "its longer side to at most this many pixels (0 = full size; instead of --scale)")
     p.add_argument("--no-grounding", action="store_true", help="skip grounding (no text encoder is loaded)")
     p.add_argument("--no-renders", action="store_true", help="write metrics.json only")
     p.add_argument("--device", default="cpu")
@@ -63,7 +66,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from stages.model.run import dataset_of_run, open_run
     from stages.scene import read_scene
 
-    from .evaluation import EvaluateConfig, evaluate_run
+    from .evaluation import EvaluateConfig, evaluate_run, render_scale_for
     from .truth_source import TruthSource
 
     for flag in ("max_unseen_renders", "max_locality_pairs"):
@@ -77,7 +80,14 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise InputError("--levels", f"{args.levels!r} is not a list of numbers", "write e.g. 0,0.5,1") from exc
     if not 0.0 < args.scale <= 1.0:
         raise InputError("--scale", f"{args.scale} is not in (0, 1]", "pass e.g. --scale 0.5 (or 1 for full size)")
+    if args.max_side < 0 or 0 < args.max_side < 16:
+        raise InputError("--max-side", f"{args.max_side} pixels",
+                         "give at least 16 pixels, e.g. 480, or 0 for full size")
+    if args.max_side and args.scale != 1.0:
+        raise InputError("--max-side", "given with --scale", "pass one of them: --scale picks a fraction, --max-side "
+                         "a size")
     ds = read_scene(data)
+    scale = render_scale_for(ds, args.max_side) if args.max_side else args.scale
     truth = None
     if args.truth:
         same_world = str(ds.meta.get("units", "")).lower() != "colmap"
@@ -90,7 +100,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         grounder = Grounder(vocab, encoder_from_args(args))
     cfg = EvaluateConfig(max_views=args.max_views, unseen_views=args.unseen_views, levels=levels,
                          novelty_min=args.novelty_min, grounding_threshold=args.grounding_threshold,
-                         save_renders=not args.no_renders, render_scale=args.scale,
+                         save_renders=not args.no_renders, render_scale=scale,
                          locality_views=args.locality_views,
                          max_unseen_renders=args.max_unseen_renders or None,
                          max_locality_pairs=args.max_locality_pairs or None)

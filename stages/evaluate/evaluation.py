@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from stages.frames.selection import downscale_factor
 from stages.scene import Camera, Frame, InputError, SceneDataset, SceneError, atomic_dir, write_json
 
 from .locality import locality
@@ -69,6 +70,17 @@ class EvaluateConfig:
     render_scale: float = 1.0
     """Render and compare at this fraction of the dataset's image size (0.5 = a quarter of the rays on a CPU);
     images are area-downscaled, masks sampled at pixel centres, the truth camera scaled alike."""
+
+
+def render_scale_for(dataset: SceneDataset, max_side: int) -> float:
+    """``1 / k`` for the smallest integer k that brings every frame's longer side to at most ``max_side``.
+
+    An integer factor, as ``livescene frames --max-side`` takes: each rendered pixel then averages whole k x k
+    blocks of the dataset image (the images_2 / images_4 convention of nerfstudio and mip-NeRF 360).
+    """
+    sizes = {(cam.width, cam.height) for cam in map(dataset.camera_of, dataset.frames)} or \
+        {(dataset.camera.width, dataset.camera.height)}
+    return 1.0 / max(downscale_factor(w, h, max_side) for w, h in sizes)
 
 
 def _evenly(items: list, n: int | None) -> list:

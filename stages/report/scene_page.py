@@ -204,6 +204,17 @@ def _ssim_form(sd: SceneData) -> str:
     return "SSIM: " + escape("; ".join(sorted(forms))) + "."
 
 
+def _scale_note(sd: SceneData) -> str:
+    """Which image size the evaluation scored at, when it was not the dataset's own (``evaluate --max-side``)."""
+    scales = {_metric(m, "config", "render_scale") for m in sd.methods if m.metrics is not None}
+    scales = {float(s) for s in scales if isinstance(s, (int, float)) and s != 1.0}
+    if not scales:
+        return ""
+    sizes = " and ".join(f"1/{round(1 / s)}" if abs(1 / s - round(1 / s)) < 1e-6 else fmt(s, 3) for s in sorted(scales))
+    return (f" Every view was rendered and scored at {sizes} of the dataset's image size (evaluate.max_side; "
+            "docs/workflow.md, \"Evaluation budget\").")
+
+
 APPEARANCE_WORDS = {"affine": "a colour correction learned per training frame",
                     "measured": "each training image divided by its measured exposure gains",
                     "none": "the images as they are"}
@@ -253,8 +264,9 @@ def section_methods(sd: SceneData) -> str:
             "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
             "not complete is flagged, and its numbers are not results. "
-            + _ssim_form(sd) + _exposure_note(sd) + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}."
-                                       for why, names in lpips_missing.items()) + "</p>"
+            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd)
+            + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}." for why, names in lpips_missing.items())
+            + "</p>"
             + _flag_banner(flags)
             + table(["method", "trust", "PSNR dB", "PSNR objects dB", "PSNR static dB", "SSIM", "LPIPS",
                      "unseen PSNR dB", "grounding mIoU (probs)", "parameters", "peak memory MiB", "train s",

@@ -367,3 +367,18 @@ def test_the_cli_refuses_a_negative_budget(eval_scene, tmp_path):
     with pytest.raises(InputError, match="max-locality-pairs"):
         evaluate_cli._evaluate(evaluate_cli.build_parser().parse_args(
             ["--run", str(tmp_path), "--out", str(tmp_path / "e"), "--max-locality-pairs", "-1"]))
+
+
+def test_render_scale_for_takes_the_largest_frame_of_per_frame_cameras(eval_scene):
+    """One integer factor for the whole dataset, from its largest frame: every view is scored at one fraction."""
+    from dataclasses import replace
+
+    from stages.evaluate.evaluation import render_scale_for
+
+    ds = eval_scene[0]
+    w, h = ds.camera.width, ds.camera.height
+    assert render_scale_for(ds, max(w, h)) == 1.0
+    assert render_scale_for(ds, max(w, h) - 1) == 0.5
+    big = replace(ds.frames[0], camera=ds.camera.scaled(3.0))
+    mixed = replace(ds, frames=[big, *ds.frames[1:]])
+    assert render_scale_for(mixed, max(w, h)) == pytest.approx(1 / 3)

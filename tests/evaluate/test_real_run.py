@@ -84,6 +84,27 @@ def test_scale_outside_0_1_is_refused(real_run, tmp_path, capsys):
     assert "--scale" in capsys.readouterr().err and not (tmp_path / "e").exists()
 
 
+def test_max_side_scores_at_an_integer_fraction_of_the_dataset_size(real_run, tmp_path):
+    """--max-side 40 on 64x48 frames: factor 2 (32x24), recorded as the render scale; 64 keeps the full size."""
+    _, data, run = real_run
+    for max_side, size, scale in ((40, [32, 24], 0.5), (64, [64, 48], 1.0)):
+        out = tmp_path / str(max_side)
+        assert evaluate_cli.main(["--run", str(run), "--data", str(data), "--out", str(out), "--max-views", "1",
+                                  "--no-grounding", "--no-renders", "--max-side", str(max_side)]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["held_out"]["image_size"] == size and metrics["config"]["render_scale"] == scale
+
+
+@pytest.mark.parametrize("extra, named", [(["--max-side", "40", "--scale", "0.5"], "--scale"),
+                                          (["--max-side", "8"], "at least 16")])
+def test_max_side_refusals_name_the_flag(real_run, tmp_path, capsys, extra, named):
+    _, data, run = real_run
+    assert evaluate_cli.main(["--run", str(run), "--data", str(data), "--out", str(tmp_path / "e"), "--no-grounding",
+                              *extra]) == 2
+    err = capsys.readouterr().err
+    assert "--max-side" in err and named in err and not (tmp_path / "e").exists()
+
+
 def test_metrics_of_a_real_run_are_identical_between_evaluations(real_run, tmp_path, monkeypatch):
     """The real model renders deterministically on the CPU and every wall-clock number is in timings.json."""
     capture, data, run = real_run

@@ -101,6 +101,20 @@ def test_a_room_with_no_unseen_combination_says_why(tmp_path, tiny_dataset):
     assert "No candidate state vector is unseen" in unseen and "nothing to test here" in unseen
 
 
+def test_an_evaluation_at_a_fraction_of_the_size_says_so(tmp_path, tiny_dataset):
+    """evaluate --max-side scored the views at half size: the methods section says it once for all methods."""
+    html = build_page(tmp_path / "full", tiny_dataset.root).read_text()
+    assert "of the dataset's image size" not in html.split('<section id="methods">')[1].split("</section>")[0]
+    results = make_fake_results(tmp_path, tiny_dataset.root)
+    for metrics in results.glob("**/metrics.json"):
+        m = json.loads(metrics.read_text())
+        m.setdefault("config", {})["render_scale"] = 0.5
+        metrics.write_text(json.dumps(m))
+    html = render(tmp_path, fake_inputs(results, tiny_dataset.root)).read_text()
+    methods = html.split('<section id="methods">')[1].split("</section>")[0]
+    assert methods.count("rendered and scored at 1/2 of the dataset's image size") == 1
+
+
 def test_page_without_evaluations(tmp_path, tiny_dataset):
     """A scene whose trainings have not run still gets a page that says so, section by section."""
     data = tiny_dataset.root

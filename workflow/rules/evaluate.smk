@@ -26,6 +26,7 @@ rule evaluate:
         unseen=config["evaluate"]["unseen_views"],
         max_unseen=config["evaluate"]["max_unseen_renders"],
         max_pairs=config["evaluate"]["max_locality_pairs"],
+        max_side=config["evaluate"]["max_side"],
         device=config["device"],
     threads: 2
     resources:
@@ -37,4 +38,4 @@ rule evaluate:
     shell:
         "{params.cli} evaluate --run {params.run} --data {input.data} {params.args} --out {output}"
         " --max-views {params.views} --unseen-views {params.unseen} --max-unseen-renders {params.max_unseen}"
-        " --max-locality-pairs {params.max_pairs} --device {params.device} > {log} 2>&1"
+        " --max-locality-pairs {params.max_pairs} --max-side {params.max_side} --device {params.device} > {log} 2>&1"
