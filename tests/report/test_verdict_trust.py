@@ -76,6 +76,25 @@ def test_items_are_matched_by_frame_state_vector_and_query():
     assert paired_difference(grounding_items(a), grounding_items(b))[:2] == (1, pytest.approx(0.1))
 
 
+def test_a_name_and_its_synonym_are_one_grounding_item_per_view():
+    """Both queries of one object are scored on the same mask: one (object, view) item, their mean IoU."""
+    def queries(ious: dict[tuple[str, str], list[float]]) -> dict:
+        return {"grounding": {"status": "computed", "queries": [
+            {"query": q, "object": o, "probs": {"per_view": v, "frames": ["0", "2"]}} for (q, o), v in ious.items()]}}
+
+    ours = queries({("fridge", "fridge"): [0.9, 0.8], ("refrigerator", "fridge"): [0.7, 0.8],
+                    ("drawer", "drawer"): [0.6, 0.5]})
+    theirs = queries({("fridge", "fridge"): [0.8, 0.8], ("refrigerator", "fridge"): [0.8, 0.8],
+                      ("drawer", "drawer"): [0.5, 0.5]})
+    assert grounding_items(ours) == pytest.approx({("fridge", "0"): 0.8, ("fridge", "2"): 0.8,
+                                                   ("drawer", "0"): 0.6, ("drawer", "2"): 0.5})
+    n, mean, _ = paired_difference(grounding_items(ours), grounding_items(theirs))
+    assert (n, mean) == (4, pytest.approx(0.1 / 4))
+    # an evaluation that names no object keys by query, as before
+    old = queries({("door", ""): [0.5, 0.7]})
+    assert set(grounding_items(old)) == {("door", "0"), ("door", "2")}
+
+
 def test_held_out_difference_is_split_into_object_and_static_pixels():
     def views(rows: dict[str, tuple[float, float]]) -> dict:
         return {"held_out": {"views": [{"frame": f, "psnr": 0.5 * (o + s), "psnr_objects": o, "psnr_static": s}
