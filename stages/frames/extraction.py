@@ -181,6 +181,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "height": written[1] if written else None,
             "source_width": size[0] if size else None,
             "source_height": size[1] if size else None,
+            "rotation": getattr(source, "rotation", None),  # a video's display rotation, applied to its frames
             "max_side": cfg.max_side,
             "downscale_factor": factor,
             "n_frames": len(rows),

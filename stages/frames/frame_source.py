@@ -102,6 +102,11 @@ class VideoSource:
         self.fps = float(capture.get(cv2.CAP_PROP_FPS))
         if not (math.isfinite(self.fps) and self.fps > 0):
             self.fps = float("nan")
+        meta = float(capture.get(cv2.CAP_PROP_ORIENTATION_META))
+        self.rotation = int(meta) % 360 if math.isfinite(meta) else 0
+        """Display rotation (degrees) of the video's metadata: a phone held upright films landscape pixels and
+        says 90. Frames are decoded turned by it (``CAP_PROP_ORIENTATION_AUTO``), as a player shows them and as
+        masks drawn on them are."""
         declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
         capture.release()
         # some streams do not declare a length: count by grabbing (no decoding) so windows can be planned
@@ -132,12 +137,17 @@ class VideoSource:
         frame threads, a damaged frame is reported while the one before it is returned)."""
         n_threads = getattr(cv2, "CAP_PROP_N_THREADS", None)
         with StderrCapture() as stderr:  # what opening prints was already said (self.remarks) when checked
+            capture = None
             if n_threads is not None:
                 capture, _ = stderr.call(lambda: cv2.VideoCapture(str(self.path), cv2.CAP_ANY, [n_threads, 1]))
-                if capture.isOpened():
-                    return capture
-                capture.release()
-            return stderr.call(lambda: cv2.VideoCapture(str(self.path)))[0]
+                if not capture.isOpened():
+                    capture.release()
+                    capture = None
+            if capture is None:
+                capture = stderr.call(lambda: cv2.VideoCapture(str(self.path)))[0]
+        # OpenCV's default, set so that no build differs (FFmpeg's open() refuses it as an open parameter)
+        capture.set(cv2.CAP_PROP_ORIENTATION_AUTO, 1)
+        return capture
 
     def __iter__(self) -> Iterator[SourceFrame | DroppedFrame]:
         """Frames in decode order. A read that fails is retried; when a later read succeeds, the failed

@@ -216,7 +216,9 @@ def test_a_portrait_phone_video_comes_out_upright(blur_video: Path, tmp_path: Pa
     out = tmp_path / "frames"
     extract_frames(FramesConfig(source=portrait, out_dir=out, progress=False))
     meta = json.loads((out / "frames.json").read_text())
-    assert (meta["width"], meta["height"]) == (HEIGHT, WIDTH)
+    assert (meta["width"], meta["height"]) == (HEIGHT, WIDTH) and meta["rotation"] == 90
+    extract_frames(FramesConfig(source=blur_video, out_dir=tmp_path / "plain", progress=False))
+    assert json.loads((tmp_path / "plain" / "frames.json").read_text())["rotation"] == 0
     frame = cv2.imread(str(out / "images" / "frame_00003.png")).astype(float)
     assert frame.shape == (WIDTH, HEIGHT, 3)
     right, wrong = (np.abs(frame - cv2.rotate(textured_frame(3), turn)).mean()
