@@ -28,12 +28,14 @@ from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
 from .unseen_states import unseen_combinations
 
-EVALUATE_VERSION = 4
+EVALUATE_VERSION = 5
 """2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames.
 3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``).
 4: the unseen-combination and locality tests say how many poses they used and asked for, and whether the render
 budget cut them (a room of many objects: ``max_unseen_renders``, ``max_locality_pairs``; a test split with
-fewer frames than asked also gives fewer poses, not cut)."""
+fewer frames than asked also gives fewer poses, not cut).
+5: held-out mean accumulation over object pixels and over static pixels (``accumulation_objects``,
+``accumulation_static``): the report's trust check on objects painted behind themselves."""
 
 
 @dataclass
@@ -192,7 +194,7 @@ class Evaluator:
                    "ssim": ssim(rgb, gt), "lpips": lpips(rgb, gt) if lpips.available else None,
                    "state": frame.state}
             if regions:
-                rec.update(self._region_psnr(frame, rgb, gt))
+                rec.update(self._region_scores(frame, rgb, gt, out.get("accumulation")))
             if frame.frame_id in gains:
                 nominal = np.clip(gt * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
                 rec["psnr_nominal"] = _finite_or_none(psnr(rgb, nominal))
@@ -210,6 +212,8 @@ class Evaluator:
             "lpips_status": lpips.status,
             "psnr_objects": summarize([r.get("psnr_objects") for r in records]),
             "psnr_static": summarize([r.get("psnr_static") for r in records]),
+            "accumulation_objects": summarize([r.get("accumulation_objects") for r in records]),
+            "accumulation_static": summarize([r.get("accumulation_static") for r in records]),
             "region_source": regions or "none: the dataset has no masks and no truth capture was given",
             **({"psnr_nominal": summarize([r.get("psnr_nominal") for r in records]),
                 "psnr_nominal_source": "each held-out image divided by its measured exposure gains (the run's "
@@ -223,18 +227,30 @@ class Evaluator:
                                     "fps": len(frames) / render_seconds if render_seconds > 0 else None}
         return summary, kept
 
-    def _region_psnr(self, frame: Frame, rgb: np.ndarray, gt: np.ndarray) -> dict[str, float | None]:
-        """PSNR over the pixels of any object and over the rest (static), by the frame's object masks.
+    def _region_scores(self, frame: Frame, rgb: np.ndarray, gt: np.ndarray,
+                       acc: np.ndarray | None) -> dict[str, float | None]:
+        """PSNR and mean accumulation over the pixels of any object and over the rest (static), by the frame's
+        object masks.
 
-        Splits the held-out error between what the state drives and what it should not touch; a frame
-        whose mask file is missing gets None for both.
+        The PSNR splits the held-out error between what the state drives and what it should not touch. The
+        accumulation is the share of a pixel's colour that the samples give; the rest is the background's (under
+        ``last_sample`` the colour at the ray's end, behind everything): objects under half opaque are painted
+        on what lies behind them rather than modelled where they are (the report's trust check). A frame whose
+        mask file is missing gets None for all.
         """
+        none = {"psnr_objects": None, "psnr_static": None, "accumulation_objects": None, "accumulation_static": None}
         try:
             objects = self._object_masks(frame)[..., :-1].any(axis=-1)
         except SceneError:
-            return {"psnr_objects": None, "psnr_static": None}
-        return {"psnr_objects": _finite_or_none(psnr(rgb, gt, objects)) if objects.any() else None,
-                "psnr_static": _finite_or_none(psnr(rgb, gt, ~objects)) if not objects.all() else None}
+            return none
+        out = {"psnr_objects": _finite_or_none(psnr(rgb, gt, objects)) if objects.any() else None,
+               "psnr_static": _finite_or_none(psnr(rgb, gt, ~objects)) if not objects.all() else None}
+        if acc is not None:
+            acc = np.asarray(acc, dtype=np.float64)
+            out["accumulation_objects"] = _finite_or_none(float(acc[objects].mean())) if objects.any() else None
+            out["accumulation_static"] = _finite_or_none(float(acc[~objects].mean())) if not objects.all() else None
+        return out
+
 
     # -- 2. unseen state combinations -----------------------------------------------------------------------
     def unseen(self, out_dir: Path | None) -> dict[str, Any]:

@@ -309,6 +309,10 @@ class TrustConfig:
     """Held-out PSNR (dB) below this: the renders are not trustworthy."""
     min_grounding_miou: float = 0.5
     """Grounding mIoU below this: the probability field has not found the objects."""
+    min_object_accumulation: float = 0.5
+    """Held-out mean accumulation over object pixels below this: most of an object's colour comes from what the
+    ray meets behind it (the background; under ``last_sample`` the colour at the ray's end), so the run paints its
+    objects, and their states, on the room behind them instead of modelling them where they are."""
 
 
 @dataclass

@@ -180,7 +180,8 @@ def _flag_html(flag: TrustFlag | None) -> str:
     if not flag.flagged:
         return (f'<span class="ok">ok</span><br><span class="note">&ge; {flag.floors["min_steps"]:,.0f} steps, '
                 f'PSNR &ge; {fmt(flag.floors["min_psnr"], 1)} dB, mIoU &ge; '
-                f'{fmt(flag.floors["min_grounding_miou"], 2)}</span>')
+                f'{fmt(flag.floors["min_grounding_miou"], 2)}, object accumulation &ge; '
+                f'{fmt(flag.floors["min_object_accumulation"], 2)}</span>')
     return (f'<span class="flag">&#9888; {escape(flag.label)}: '
             + "; ".join(escape(r) for r in flag.reasons) + "</span>")
 

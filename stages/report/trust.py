@@ -1,10 +1,10 @@
 """Whether a trained run's numbers are results: the trust floors of its config against what it measured.
 
 A run is flagged when it trained fewer steps than ``trust.min_steps`` (undertrained), when its held-out
-PSNR or its grounding mIoU (rendered probabilities, object names) is below the floor, or when training
-did not end with status "completed" (not trustworthy). The floors come from the run's config.yaml
-(``trust`` section); a run written before that section existed uses the defaults of
-``stages.model.config.TrustConfig``, so an old run is judged by the same floors as a new one.
+PSNR, its grounding mIoU (rendered probabilities, object names) or its held-out accumulation over object
+pixels is below the floor, or when training did not end with status "completed" (not trustworthy). The
+floors come from the run's config.yaml (``trust`` section); a run written before that section existed uses
+the defaults of ``stages.model.config.TrustConfig``, so an old run is judged by the same floors as a new one.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ class TrustFlag:
     kinds: list[str] = field(default_factory=list)
     """'undertrained' (too few steps) and/or 'not trustworthy' (low scores, unfinished training)."""
     floors: dict[str, float] = field(default_factory=dict)
-    """The floors applied: min_steps, min_psnr, min_grounding_miou."""
+    """The floors applied: min_steps, min_psnr, min_grounding_miou, min_object_accumulation."""
     floors_from: str = ""
     """Where the floors came from: the run's config.yaml or the TrustConfig defaults."""
 
@@ -60,7 +60,8 @@ def trust_floors(config: dict | None, where: str | Path = "config.yaml") -> tupl
         return floors, "TrustConfig defaults (the run's config.yaml has no trust section)"
     if not isinstance(section, dict):
         raise InputError(where, f"trust is {section!r}, not a mapping",
-                         "write trust: {min_steps: N, min_psnr: dB, min_grounding_miou: x}, or delete it")
+                         "write trust: {min_steps: N, min_psnr: dB, min_grounding_miou: x, "
+                         "min_object_accumulation: a}, or delete it")
     for key in floors:
         if key not in section:
             continue
@@ -104,6 +105,12 @@ def assess_run(method: str, run: dict | None, config: dict | None, metrics: dict
     if miou is not None and miou < floors["min_grounding_miou"]:
         untrusted.append(f"grounding mIoU (probs, names) {miou:.3f} < trust.min_grounding_miou "
                          f"{floors['min_grounding_miou']:g}")
+    held_acc = ((metrics or {}).get("held_out") or {}).get("accumulation_objects") or {}
+    acc = _number(held_acc.get("mean"))
+    if acc is not None and acc < floors["min_object_accumulation"]:
+        untrusted.append(f"objects mostly transparent: held-out accumulation over object pixels {acc:.2f} < "
+                         f"trust.min_object_accumulation {floors['min_object_accumulation']:g} (their colour comes "
+                         "from behind them)")
     flag.reasons = undertrained + untrusted
     flag.kinds = (["undertrained"] if undertrained else []) + (["not trustworthy"] if untrusted else [])
     return flag

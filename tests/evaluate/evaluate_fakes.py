@@ -51,6 +51,13 @@ def _checker() -> np.ndarray:
     return out
 
 
+def _accumulation() -> np.ndarray:
+    """The fridge 0.3 opaque, the drawer 0.5, the rest of the room 0.9: object mean 0.4 (equal pixel counts)."""
+    acc = np.full((H, W), 0.9)
+    acc[:, FRIDGE_COLS], acc[:, DRAWER_COLS] = 0.3, 0.5
+    return acc
+
+
 class FakeRun:
     """The model API: ``objects`` and ``render(camera, c2w, states, frame_index)``."""
 
@@ -68,7 +75,7 @@ class FakeRun:
         else:
             base = self.truth.render(c2w, states)["rgb"].astype(np.float64)
         probs = label_map_to_onehot(np.array([[-1, 0, 1][i] for i in ids_map().ravel()]).reshape(H, W), 2)
-        return {"rgb": base + _checker(), "depth": np.ones((H, W)), "accumulation": np.ones((H, W)),
+        return {"rgb": base + _checker(), "depth": np.ones((H, W)), "accumulation": _accumulation(),
                 "probs": probs.astype(np.float32)}
 
 

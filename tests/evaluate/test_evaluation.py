@@ -42,6 +42,9 @@ def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
         assert v["psnr_objects"] == pytest.approx(10 * math.log10(1 / (ERROR**2 * 6 / 12)), abs=1e-6)
         assert v["psnr_static"] is None
     assert held["psnr_objects"]["n"] == 4 and held["psnr_static"]["n"] == 0
+    # how opaque the objects are, apart from the room: the report's trust check on objects painted behind them
+    assert held["accumulation_objects"]["mean"] == pytest.approx(0.4) and held["accumulation_objects"]["n"] == 4
+    assert held["accumulation_static"]["mean"] == pytest.approx(0.9)
     assert held["image_size"] == [16, 12]
     assert held["lpips"] is None or held["lpips_status"].startswith("computed")
     # each held-out view was rendered at its own state and frame index

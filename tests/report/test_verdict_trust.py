@@ -21,10 +21,12 @@ T_975 = {2: 4.3026527, 3: 3.1824463, 4: 2.7764451}  # Student t quantiles from t
 
 
 def _metrics(views: dict[str, float] | None = None, records: list[dict] | None = None,
-             ious: dict[str, tuple[list[float], list[str]]] | None = None, miou: float = 0.9) -> dict:
+             ious: dict[str, tuple[list[float], list[str]]] | None = None, miou: float = 0.9,
+             object_accumulation: float | None = 0.95) -> dict:
     # held-out mean: the trust tests pass one view, whose PSNR is then the mean
     return {"held_out": {"views": [{"frame": f, "psnr": p} for f, p in (views or {}).items()],
-                         "psnr": {"mean": min((p for p in (views or {}).values() if p is not None), default=None)}},
+                         "psnr": {"mean": min((p for p in (views or {}).values() if p is not None), default=None)},
+                         "accumulation_objects": {"mean": object_accumulation}},
             "unseen_combinations": {"status": "computed", "records": records or []},
             "grounding": {"status": "computed", "miou_probs_name": miou,
                           "queries": [{"query": q, "probs": {"per_view": v, "frames": f}}
@@ -143,13 +145,16 @@ def _run(steps: int = 50_000, status: str = "completed") -> dict:
     return {"steps": steps, "status": status}
 
 
-FLOORS = {"min_steps": 1000, "min_psnr": 20.0, "min_grounding_miou": 0.5}
+FLOORS = {"min_steps": 1000, "min_psnr": 20.0, "min_grounding_miou": 0.5, "min_object_accumulation": 0.5}
 
 
 @pytest.mark.parametrize(("run", "metrics", "reason", "kind"), [
     (_run(steps=999), _metrics({"0": 25.0}), "999 steps < trust.min_steps 1,000", "undertrained"),
     (_run(), _metrics({"0": 19.5}), "held-out PSNR 19.50 dB < trust.min_psnr 20 dB", "not trustworthy"),
     (_run(), _metrics({"0": 25.0}, miou=0.4), "grounding mIoU (probs, names) 0.400 < trust.min_grounding_miou 0.5",
+     "not trustworthy"),
+    (_run(), _metrics({"0": 25.0}, object_accumulation=0.44), "objects mostly transparent: held-out accumulation "
+     "over object pixels 0.44 < trust.min_object_accumulation 0.5 (their colour comes from behind them)",
      "not trustworthy"),
     (_run(status="time_budget"), _metrics({"0": 25.0}), "training status 'time_budget', not 'completed'",
      "not trustworthy"),
@@ -161,8 +166,11 @@ def test_each_trust_floor_flags_the_run(run, metrics, reason, kind):
 
 
 def test_a_run_above_every_floor_is_not_flagged():
-    flag = assess_run("m", _run(steps=1000), {"trust": FLOORS}, _metrics({"0": 20.0}, miou=0.5))
+    flag = assess_run("m", _run(steps=1000), {"trust": FLOORS}, _metrics({"0": 20.0}, miou=0.5,
+                                                                         object_accumulation=0.5))
     assert not flag.flagged and flag.reasons == [] and flag.floors == FLOORS
+    # an evaluation older than the accumulation record (EVALUATE_VERSION < 5) is not judged on it
+    assert not assess_run("m", _run(), {"trust": FLOORS}, _metrics({"0": 25.0}, object_accumulation=None)).flagged
     both = assess_run("m", _run(steps=10), {"trust": FLOORS}, _metrics({"0": 10.0}))
     assert both.label == "undertrained and not trustworthy" and len(both.reasons) == 2
 
