@@ -309,7 +309,8 @@ def section_verdict(sd: SceneData) -> str:
         mean = f"{fmt(r.mean, 3)}{' ' + r.unit if r.unit and r.mean is not None else ''}"
         rows.append([escape(r.baseline), escape(r.label), r.n, mean, _interval(r.ci95, r.unit), cell])
     return ("<p>LiveScene minus the baseline on the same items (same views, same unseen state vectors, same "
-            "grounding queries and views): mean difference and its 95% Student-t interval. A verdict says "
+            "objects and views of the grounding, an object's name and synonyms averaged: they are scored on one "
+            "mask): mean difference and its 95% Student-t interval. A verdict says "
             "ahead or behind only when the interval excludes 0; higher is better for every metric "
             "but those marked lower is better.</p>"
             + _seed_caveat(sd)
