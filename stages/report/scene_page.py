@@ -263,8 +263,9 @@ def section_methods(sd: SceneData) -> str:
             "PSNR objects / static: the same views' PSNR over the pixels of any object mask and over the rest "
             "(what the states drive, and what they should leave alone). "
             "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
-            "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names) or whose training did "
-            "not complete is flagged, and its numbers are not results. "
+            "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names, held-out accumulation "
+            "over object pixels: objects mostly transparent are painted on what lies behind them) or whose "
+            "training did not complete is flagged, and its numbers are not results. "
             + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd)
             + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}." for why, names in lpips_missing.items())
             + "</p>"
