@@ -251,7 +251,6 @@ class Evaluator:
             out["accumulation_static"] = _finite_or_none(float(acc[~objects].mean())) if not objects.all() else None
         return out
 
-
     # -- 2. unseen state combinations -----------------------------------------------------------------------
     def unseen(self, out_dir: Path | None) -> dict[str, Any]:
         if self.truth is None:
