@@ -131,6 +131,12 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
     video = tmp_path / "room.mp4"
     video.write_bytes(b"")  # a dry run only needs the file to exist
     (tmp_path / "shots").mkdir()
+    learned, keyed, static = (tmp_path / name for name in ("learned", "keyed", "static"))
+    for ds in (learned, keyed, static):
+        ds.mkdir()
+    for ds in (learned, keyed):
+        (ds / "mapping.yaml").write_text("1: door\n")
+    (keyed / "key_frame_value.yaml").write_text("frame_00000: {door: 0.0}\n")
     workflow_copy.write_scenes([
         {"scene": "none", "source": "video", "path": video, "masks": "no", "key_frames": "no", "names": "no",
          "truth": "none"},
@@ -142,7 +148,9 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
         {"scene": "nomodel", "source": "images", "path": tmp_path / "shots", "poses": "colmap:/no/such/sparse",
          "masks": "no", "key_frames": "no", "names": "no"},
         {"scene": "keyless", "source": "images", "path": tmp_path / "shots", "masks": tmp_path / "shots",
-         "key_frames": "no", "names": "no"}])
+         "key_frames": "no", "names": "no"},
+        *({"scene": ds.name, "source": "dataset", "path": ds, "poses": "given", "key_frames": "no", "names": "no"}
+          for ds in (learned, keyed, static))])
     run = workflow_copy.snakemake("-n", "--cores", "1")
     assert run.code != 0
     assert "line 2 (scene 'none'): column 'truth': 'none' is not 'yes', 'no' or a capture folder" in run.output
@@ -156,6 +164,11 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
     assert "line 7 (scene 'keyless'): column 'key_frames': the masks make objects, but without key frames" \
         in run.output
     assert "line 2 (scene 'none'): column 'key_frames'" not in run.output  # no masks: a static room
+    # a ready dataset: its objects (mapping.yaml) need its key frames for learned states; without objects, or
+    # with key frames, 'no' is fine
+    assert "line 8 (scene 'learned'): column 'key_frames': 'no' trains the dataset's objects" in run.output
+    assert "(scene 'keyed'): column 'key_frames'" not in run.output
+    assert "(scene 'static'): column 'key_frames'" not in run.output
     assert "MissingInputException" not in run.output
 
 

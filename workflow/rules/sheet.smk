@@ -49,6 +49,16 @@ def frames_assembled(kind, poses):
     return kind != "dataset" and poses != "given"
 
 
+def _names_objects(mapping):
+    """True when a dataset's mapping.yaml names at least one object (an unreadable one is scene_validate's to
+    report, with its line)."""
+    try:
+        names = yaml.safe_load(Path(mapping).read_text()) if Path(mapping).is_file() else None
+    except (OSError, yaml.YAMLError):
+        return False
+    return isinstance(names, dict) and bool(names)
+
+
 def _row_problems(record):
     """What the schema cannot say about one row: which values suit its source, and that paths exist."""
     kind, poses = record["source"], record.get("poses", "estimate")
@@ -84,6 +94,14 @@ def _row_problems(record):
         problems.append("column 'key_frames': the masks make objects, but without key frames nothing gives their "
                         "states (docs/labels-states.md); fix: give the key-frame file (key_frame_value.yaml, "
                         "annotations.yml or CSV), or write 'no' in column 'masks' to train the room as a static field")
+    # a ready dataset's objects are in its mapping.yaml; 'no' key frames trains them with learned states, which
+    # only its key_frame_value.yaml supervises: refused here rather than by the trainer after validation
+    root = Path(record["path"])
+    if kind == "dataset" and record.get("key_frames", "yes") == "no" and _names_objects(root / "mapping.yaml") \
+            and not (root / "key_frame_value.yaml").is_file():
+        problems.append(f"column 'key_frames': 'no' trains the dataset's objects ({root / 'mapping.yaml'}) with "
+                        "learned states, which its key_frame_value.yaml supervises, and it has none; fix: write 'yes' "
+                        "to train on the states its transforms.json gives every frame, or add key_frame_value.yaml")
     truth = record.get("truth", "no")
     if truth == "yes" and kind != "synthetic":
         problems.append(f"column 'truth': 'yes' means a synthetic capture's own truth; for a {kind} source write "
