@@ -80,8 +80,7 @@ def render_scale_for(dataset: SceneDataset, max_side: int) -> float:
     An integer factor, as ``livescene frames --max-side`` takes: each rendered pixel then averages whole k x k
     blocks of the dataset image (the images_2 / images_4 convention of nerfstudio and mip-NeRF 360).
     """
-    sizes = {(cam.width, cam.height) for cam in map(dataset.camera_of, dataset.frames)} or \
-        {(dataset.camera.width, dataset.camera.height)}
+    sizes = {(cam.width, cam.height) for cam in map(dataset.camera_of, dataset.frames)}  # read_scene: >= 1 frame
     return 1.0 / max(downscale_factor(w, h, max_side) for w, h in sizes)
 
 

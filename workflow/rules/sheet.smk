@@ -53,8 +53,8 @@ def _names_objects(mapping):
     """True when a dataset's mapping.yaml names at least one object (an unreadable one is scene_validate's to
     report, with its line)."""
     try:
-        names = yaml.safe_load(Path(mapping).read_text()) if Path(mapping).is_file() else None
-    except (OSError, yaml.YAMLError):
+        names = yaml.safe_load(mapping.read_text())
+    except (OSError, yaml.YAMLError):  # missing or unreadable
         return False
     return isinstance(names, dict) and bool(names)
 
@@ -97,8 +97,8 @@ def _row_problems(record):
     # a ready dataset's objects are in its mapping.yaml; 'no' key frames trains them with learned states, which
     # only its key_frame_value.yaml supervises: refused here rather than by the trainer after validation
     root = Path(record["path"])
-    if kind == "dataset" and record.get("key_frames", "yes") == "no" and _names_objects(root / "mapping.yaml") \
-            and not (root / "key_frame_value.yaml").is_file():
+    if kind == "dataset" and record.get("key_frames", "yes") == "no" and not (root / "key_frame_value.yaml").is_file() \
+            and _names_objects(root / "mapping.yaml"):
         problems.append(f"column 'key_frames': 'no' trains the dataset's objects ({root / 'mapping.yaml'}) with "
                         "learned states, which its key_frame_value.yaml supervises, and it has none; fix: write 'yes' "
                         "to train on the states its transforms.json gives every frame, or add key_frame_value.yaml")
