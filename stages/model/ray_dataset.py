@@ -141,6 +141,10 @@ class RayDataset:
 
     def batch(self, flat: torch.Tensor) -> RayBatch:
         """Rays of flat pixel indices (frame * H * W + row * W + col)."""
+        if self.device.type == "cuda" and flat.device.type == "cpu":
+            # indices drawn by the CPU generator (the same rays on any device): a copy from pageable memory would
+            # wait for the GPU's queue once per step, one from pinned memory does not
+            flat = flat.pin_memory().to(self.device, non_blocking=True)
         flat = flat.to(self.device)
         hw = self.height * self.width
         f, pix = flat // hw, flat % hw
