@@ -100,12 +100,16 @@ def autocast_dtype(setting: str, device: torch.device) -> torch.dtype | None:
     raise InputError("train.mixed_precision", f"unknown value {setting!r}", "use auto, bf16, fp16 or off")
 
 
-def compile_fields(model: torch.nn.Module) -> None:
-    """Compile every field's forward in place (state_dict keys unchanged); a graph break is an error."""
+def compile_fields(model: torch.nn.Module, mode: str = "default") -> None:
+    """Compile every field's forward in place (state_dict keys unchanged); a graph break is an error.
+
+    ``reduce-overhead`` (CUDA graphs) needs static shapes; the default mode compiles shape-generic code once.
+    """
+    options = {"fullgraph": True, "dynamic": mode == "default", "mode": mode}
     for name in ("field", "probability_field"):
-        getattr(model, name).compile(fullgraph=True, dynamic=True)
+        getattr(model, name).compile(**options)
     for proposal in getattr(model, "proposal_fields", []):
-        proposal.compile(fullgraph=True, dynamic=True)
+        proposal.compile(**options)
 
 
 def seed_everything(seed: int) -> None:
@@ -223,7 +227,10 @@ class Trainer:
                              "annotate key frames, or set --set model.state.key_frame_every=N")
         self.model = build_model(cfg.method, cfg.model, self.info).to(self.device)
         if cfg.train.compile:
-            compile_fields(self.model)
+            compile_fields(self.model, cfg.train.compile_mode)
+        # CUDA graph replays overwrite their last outputs: each step starts a new generation of them
+        self._graph_steps = cfg.train.compile and cfg.train.compile_mode == "reduce-overhead" \
+            and self.device.type == "cuda"
         if self.language is not None:
             self.language = self.language.to(self.device)
         self._named_params = [(n, p) for n, p in self.model.named_parameters() if p.requires_grad]
@@ -376,6 +383,8 @@ class Trainer:
         the skipped ones and keeps the streak (docs/model.md).
         """
         self.model.train()
+        if self._graph_steps:
+            torch.compiler.cudagraph_mark_step_begin()
         batch = self.train_rays.sample(self.config.train.batch_rays, self.ray_generator)
         with self._autocast():
             out = self.model(batch.rays, step=self.step, generator=self.jitter_generator)

@@ -68,6 +68,7 @@ def test_values_are_typed_exactly():
     assert "expected an integer" in refusal(["train.max_steps=1000.0"]).problem
     assert "expected true or false" in refusal(["train.compile=1"]).problem
     assert "expected one of 'given', 'learned'" in refusal(["model.state.mode=lerned"]).problem
+    assert "expected one of 'default', 'reduce-overhead'" in refusal(["train.compile_mode=max-autotune"]).problem
 
 
 def test_a_bad_preset_or_overlay_value_names_its_file(tmp_path, monkeypatch):

@@ -94,3 +94,6 @@ def test_digest_and_differences_helpers():
     old = {"seed": 0, "data": "a", "train": {"lr": 0.02, "max_steps": 10}, "trust": {"min_psnr": 20.0}}
     new = {"seed": 1, "data": "b", "train": {"lr": 0.02, "max_steps": 99}, "trust": {"min_psnr": 5.0}}
     assert config_differences(old, new) == ["seed"]
+    # a checkpoint written before train.compile_mode existed resumes under any mode: how it runs, not what it learns
+    new["train"]["compile_mode"] = "reduce-overhead"
+    assert config_differences(old, new) == ["seed"]
