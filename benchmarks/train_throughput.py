@@ -118,10 +118,12 @@ def measure_one(args: argparse.Namespace) -> dict:
             if cuda:
                 torch.cuda.synchronize(device)
             times.append(time.perf_counter() - t0)
-        with count_host_syncs() as syncs:
+        with count_host_syncs(device) as syncs:
             step()
-        with count_torch_ops() as ops:
-            step()
+        ops = None  # a dispatch mode would make compiled fields recompile (fullgraph: fail); it sees eager ops only
+        if not cfg.train.compile:
+            with count_torch_ops() as ops:
+                step()
     step_s = sorted(times)[len(times) // 2]
     if cuda:
         peak, kind = torch.cuda.max_memory_allocated(device) / 2**20, "cuda max_memory_allocated"
@@ -131,7 +133,8 @@ def measure_one(args: argparse.Namespace) -> dict:
         "method": args.method, "language": args.language, "preset": args.preset, "device": str(device),
         "threads": torch.get_num_threads(), "rays": cfg.train.batch_rays,
         "step_ms": round(step_s * 1000, 1), "rays_per_s": round(cfg.train.batch_rays / step_s),
-        "ops": int(sum(ops.values())), "syncs": int(sum(syncs.values())), "sync_calls": dict(syncs),
+        "ops": None if ops is None else int(sum(ops.values())), "syncs": int(sum(syncs.values())),
+        "sync_calls": dict(syncs),
         "peak_mib": round(peak, 1), "peak_kind": kind,
     }
 
@@ -247,7 +250,12 @@ def main() -> int:
         cmd += ["--with-language"] if lang else []
         for o in args.overrides:
             cmd += ["--set", o]
-        out = subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=ROOT).stdout
+        done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+        if done.returncode != 0:
+            sys.stderr.write(done.stderr)
+            raise SystemExit(f"{method} (language {'on' if lang else 'off'}) failed with exit status "
+                             f"{done.returncode}: its error is above")
+        out = done.stdout
         row = json.loads(out.strip().splitlines()[-1])
         row["load_before_after"] = [round(load0, 2), round(os.getloadavg()[0], 2)]
         print(json.dumps(row), flush=True)

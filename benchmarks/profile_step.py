@@ -1,0 +1,83 @@
+"""Where one training step spends its time: torch.profiler over a few steps of one method (issue 16).
+
+Builds the trainer as ``train_throughput.py`` does (same preset, overrides and demo work folder), runs warm-up
+steps from ``--start-step``, then profiles ``--steps`` steps and prints the ops that take the most device time
+(CUDA) or CPU time, and on CUDA the number of kernel launches per step. ``--out`` also writes the whole table.
+
+    .venv/bin/python benchmarks/profile_step.py --preset gpu-paper --device cuda --rays 4096 --language
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+from demo_dataset import DEMO_SPEC, cached_demo_dataset
+from train_throughput import bench_config, language_targets
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--method", default="livescene")
+    p.add_argument("--preset", default="cpu-demo")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
+    p.add_argument("--language", action="store_true", help="train with the language table")
+    p.add_argument("--steps", type=int, default=5, help="profiled steps")
+    p.add_argument("--warmup", type=int, default=10)
+    p.add_argument("--start-step", type=int, default=300)
+    p.add_argument("--rows", type=int, default=25)
+    p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
+    p.add_argument("--capture", type=Path, default=DEMO_SPEC)
+    p.add_argument("--work", type=Path, default=None)
+    p.add_argument("--out", type=Path, default=None, help="write the whole table here")
+    args = p.parse_args()
+
+    import torch
+    from torch.profiler import ProfilerActivity, profile
+
+    from stages.model.trainer import Trainer
+
+    if args.work is None:
+        args.work = Path(tempfile.gettempdir()) / f"livescene-bench-{args.capture.stem}"
+    args.work.mkdir(parents=True, exist_ok=True)
+    _, dataset = cached_demo_dataset(args.work, spec=args.capture)
+    targets = language_targets(args.work, dataset)
+    args.warmup = max(args.warmup, 1)
+    args.steps = max(args.steps, 1)
+    cfg = bench_config(args, args.method, args.language, dataset, targets)
+    with tempfile.TemporaryDirectory() as out:
+        trainer = Trainer(cfg, out, device=args.device, progress=False)
+        cuda = trainer.device.type == "cuda"
+        trainer.step = args.start_step
+        for _ in range(args.warmup):
+            trainer.train_step()
+            trainer.step += 1
+        activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if cuda else [])
+        if cuda:
+            torch.cuda.synchronize()
+        with profile(activities=activities) as prof:
+            for _ in range(args.steps):
+                trainer.train_step()
+                trainer.step += 1
+            if cuda:
+                torch.cuda.synchronize()
+    averages = prof.key_averages()
+    sort = "self_device_time_total" if cuda else "self_cpu_time_total"
+    print(f"\n{args.method}, language {'on' if args.language else 'off'}, preset {args.preset}, {args.device}, "
+          f"{cfg.train.batch_rays} rays, {args.steps} profiled steps (times are totals over them)\n")
+    print(averages.table(sort_by=sort, row_limit=args.rows, max_name_column_width=60))
+    if cuda:
+        kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]
+        device_us = sum(e.device_time for e in kernels if e.device_time > 0)
+        print(f"kernels per step: {len(kernels) / args.steps:.0f}; device busy per step: "
+              f"{device_us / args.steps / 1000:.1f} ms")
+    if args.out is not None:
+        args.out.write_text(averages.table(sort_by=sort, row_limit=-1, max_name_column_width=80))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
