@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# The issue-16 device checks, as one short script for a lent CUDA machine (docs/model.md, "Speed"): the
-# machine's own python3 (torch, no venv, no open3d) and a demo work folder prepared beforehand (WORK, made here by
-# `benchmarks/train_throughput.py --work WORK`, which renders the capture and the language targets once).
-# Logs go under OUT. Each part has its own time limit, the most important first.
+# The issue-16 device checks as one short script for a lent CUDA machine (docs/model.md, "Training on a
+# GPU"). That machine has torch but no open3d, so the demo's work folder is made here and carried (WORK):
+#   .venv/bin/python benchmarks/train_throughput.py --work .gpuwork/demo --rounds 1 --steps 1 --methods livescene
+#   rm -rf .gpuwork/demo/capture/{video.mp4,masks,truth/depth,truth/images}   # only truth/transforms.json is read
+# (.gpuwork ignored in .git/info/exclude, named in the run's carry). Logs go under OUT. Each part has its own
+# time limit, the most important first; LIMIT bounds the whole script.
 set -u
 OUT=${OUT:-/tmp/livescene-gpu-check}
 WORK=${WORK:-.gpuwork/demo}
