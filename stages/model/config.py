@@ -295,8 +295,8 @@ class TrainConfig:
     threads: int = 0
     """torch CPU threads (0 = leave torch's default)."""
     compile: bool = False
-    """torch.compile the fields' forward passes (fullgraph, dynamic shapes). Off by default: unmeasured on CUDA,
-    and on the CPU the inductor build takes longer than a cpu-demo run saves (docs/model.md)."""
+    """torch.compile the fields' forward passes (fullgraph, dynamic shapes). Off by default: on an H100 it trained
+    no faster than eager, and on the CPU the inductor build takes longer than a cpu-demo run saves (docs/model.md)."""
     compile_mode: Literal["default", "reduce-overhead"] = "default"
     """With ``compile``: torch.compile's mode. ``reduce-overhead`` replays each field's kernels as CUDA graphs
     (static shapes: one graph per distinct batch shape), which saves the launch cost of a step whose device
