@@ -24,6 +24,10 @@ echo "== 20 steps under torch.cuda.set_sync_debug_mode('error')"
 timeout 90 "$PY" -m pytest -q --tb=short tests/model/test_fast_paths.py -k cuda > "$OUT/sync_test.txt" 2>&1
 tail -3 "$OUT/sync_test.txt"
 
+echo "== stability: the same results under CUDA bf16 and fp16 autocast"
+timeout 120 "$PY" -m pytest -q tests/stability/test_stability_cases.py -k autocast_cuda > "$OUT/stability.txt" 2>&1
+tail -3 "$OUT/stability.txt"
+
 echo "== training throughput, every method, language on and off"
 timeout 200 "$PY" benchmarks/train_throughput.py "${cuda[@]}" --rounds 1 --steps 40 2>&1 | tee "$OUT/throughput.txt" | tail -14
 
