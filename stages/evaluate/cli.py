@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from stages.evaluate.unseen_states import OBSERVED_WITHIN
 from stages.scene import InputError
 from stages.scene.cli_errors import cli_errors
 
@@ -40,6 +41,9 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
                    help="most (pose, object) pairs of the locality test: fewer poses for many objects (0 = no cap)")
     p.add_argument("--novelty-min", type=float, default=0.25,
                    help="least L-inf distance to training states for a combination to count as unseen")
+    p.add_argument("--observed-within", type=float, default=OBSERVED_WITHIN,
+                   help="an object takes a level in the unseen combinations only where a training frame holds it "
+                        "within this distance of the level (negative: every level)")
     p.add_argument("--grounding-threshold", type=float, default=0.5, help="relevancy threshold of the grounding IoU")
     p.add_argument("--scale", type=float, default=1.0,
                    help="render and compare at this fraction of the image size (e.g. 0.5 on a CPU: 4x fewer rays)")
@@ -100,6 +104,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         grounder = Grounder(vocab, encoder_from_args(args))
     cfg = EvaluateConfig(max_views=args.max_views, unseen_views=args.unseen_views, levels=levels,
                          novelty_min=args.novelty_min, grounding_threshold=args.grounding_threshold,
+                         observed_within=args.observed_within if args.observed_within >= 0 else None,
                          save_renders=not args.no_renders, render_scale=scale,
                          locality_views=args.locality_views,
                          max_unseen_renders=args.max_unseen_renders or None,

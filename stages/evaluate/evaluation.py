@@ -26,9 +26,9 @@ from stages.scene import Camera, Frame, InputError, SceneDataset, SceneError, at
 from .locality import locality
 from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
-from .unseen_states import unseen_combinations
+from .unseen_states import OBSERVED_WITHIN, observed_levels, unseen_combinations
 
-EVALUATE_VERSION = 5
+EVALUATE_VERSION = 6
 """2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames.
 3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``).
 4: the unseen-combination and locality tests say how many poses they used and asked for, and whether the render
@@ -55,6 +55,9 @@ class EvaluateConfig:
     """Levels each object is set to in the unseen-combination test."""
     novelty_min: float = 0.25
     """Least L-infinity distance to every training state vector for a combination to count as unseen."""
+    observed_within: float | None = OBSERVED_WITHIN
+    """An object takes a level in the unseen-combination test only where a training frame holds it within this
+    distance of the level (an object never opened fully is not asked to render open); None = every level."""
     moved_threshold: float = 0.05
     """An object 'moved' when its test value differs from the view's own state by more than this."""
     grounding_threshold: float = 0.5
@@ -103,6 +106,12 @@ def _within(views: int, per_view: int, budget: int | None) -> int:
 def _cut(views: int, asked: int, available: int) -> bool:
     """Whether the budget left fewer poses than asking alone would have (a short test split is not a cut)."""
     return min(views, available) < min(asked, available)
+
+
+def _range(states: np.ndarray) -> list[float] | None:
+    """[min, max] of one object's training states (None when no frame has one)."""
+    finite = states[np.isfinite(states)]
+    return [float(finite.min()), float(finite.max())] if finite.size else None
 
 
 def _to_png(path: Path, rgb: np.ndarray) -> None:
@@ -257,7 +266,9 @@ class Evaluator:
         cfg = self.config
         objects = self.ds.objects
         train_states = self.ds.state_matrix(self.ds.frames_in("train"))
-        combos = unseen_combinations(len(objects), train_states, cfg.levels, cfg.novelty_min)
+        combos = unseen_combinations(len(objects), train_states, cfg.levels, cfg.novelty_min,
+                                     observed_within=cfg.observed_within)
+        observed = dict(zip(objects, observed_levels(train_states, cfg.levels, cfg.observed_within), strict=True))
         n_views = _within(cfg.unseen_views, sum(c.unseen for c in combos), cfg.max_unseen_renders)
         views = _evenly(self.ds.frames_in("test"), n_views)
         records, seen = [], []
@@ -325,6 +336,10 @@ class Evaluator:
             "alignment_residual": self.truth.alignment_residual(self.ds.frames),
             "levels": list(cfg.levels),
             "novelty_min": cfg.novelty_min,
+            "observed_within": cfg.observed_within,
+            "training_range": {o: _range(train_states[:, k]) for k, o in enumerate(objects)},
+            "levels_not_observed": {o: [v for v in cfg.levels if v not in observed[o]] for o in objects
+                                    if len(observed[o]) < len(cfg.levels)},
             "views": len(views), "views_asked": cfg.unseen_views, "max_renders": cfg.max_unseen_renders,
             "views_cut": _cut(n_views, cfg.unseen_views, len(self.ds.frames_in("test"))),
             "combinations": [asdict(c) | {"novelty": _finite_or_none(c.novelty)} for c in combos],

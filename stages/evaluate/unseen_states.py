@@ -5,6 +5,12 @@ set to levels other than ``v``, choosing among those assignments the one
 farthest (L-infinity) from every training state vector. A vector counts as
 unseen when that distance is at least ``novelty_min``; its distance is kept
 so a reader sees how novel each combination is.
+
+Only levels each object was *observed* at take part: a training frame holds
+that object within ``observed_within`` of the level. The test asks whether
+states seen apart can be combined; an object the capture never opened fully
+has no appearance to recombine at 1, and the novelty search would otherwise
+prefer exactly such levels (they are the farthest from every training state).
 """
 
 from __future__ import annotations
@@ -17,6 +23,10 @@ import numpy as np
 
 MAX_ASSIGNMENTS = 512
 """Above this many assignments of the other objects, a seeded random subset is searched instead."""
+
+OBSERVED_WITHIN = 0.125
+"""A level counts as observed for an object when a training frame holds the object within this distance of it
+(half the least novelty of an unseen combination)."""
 
 
 @dataclass(frozen=True)
@@ -41,22 +51,48 @@ def novelty(vector: np.ndarray, train_states: np.ndarray) -> float:
     return float(np.abs(rows - vector[None]).max(axis=1).min())
 
 
-def unseen_combinations(n_objects: int, train_states: np.ndarray, levels: Sequence[float] = (0.0, 0.5, 1.0),
-                        novelty_min: float = 0.25, seed: int = 0) -> list[StateCombination]:
-    """Test vectors (see module docstring), de-duplicated, in (object, level) order."""
+def observed_levels(train_states: np.ndarray, levels: Sequence[float],
+                    within: float | None = OBSERVED_WITHIN) -> list[list[float]]:
+    """Per object (column of ``[N, alpha]``), the levels some training frame holds it within ``within`` of.
+
+    ``None`` counts every level as observed (also where training has no states). An object observed at no level
+    (it stays between them) keeps the level nearest to its states, so every object takes part.
+    """
     levels = [float(v) for v in levels]
+    train_states = np.asarray(train_states, dtype=np.float64)
+    out = []
+    for column in train_states.T:
+        column = column[np.isfinite(column)]
+        if within is None or column.size == 0:
+            out.append(list(levels))
+            continue
+        distance = [float(np.abs(column - v).min()) for v in levels]
+        out.append([v for v, d in zip(levels, distance, strict=True) if d <= within]
+                   or [levels[int(np.argmin(distance))]])
+    return out
+
+
+def unseen_combinations(n_objects: int, train_states: np.ndarray, levels: Sequence[float] = (0.0, 0.5, 1.0),
+                        novelty_min: float = 0.25, seed: int = 0,
+                        observed_within: float | None = OBSERVED_WITHIN) -> list[StateCombination]:
+    """Test vectors (see module docstring), de-duplicated, in (object, level) order; none for a room without
+    objects."""
+    if n_objects == 0:
+        return []
     rng = np.random.default_rng(seed)
     train_states = np.asarray(train_states, dtype=np.float64).reshape(-1, n_objects)
+    allowed = observed_levels(train_states, levels, observed_within)
     out: list[StateCombination] = []
     seen: set[tuple[float, ...]] = set()
     for i in range(n_objects):
-        for v in levels:
-            others = [lv for lv in levels if abs(lv - v) > 1e-9] or levels
-            n_assign = len(others) ** (n_objects - 1)
+        for v in allowed[i]:
+            others = [[lv for lv in allowed[j] if abs(lv - v) > 1e-9] or allowed[j]
+                      for j in range(n_objects) if j != i]
+            n_assign = int(np.prod([len(o) for o in others]))
             if n_assign <= MAX_ASSIGNMENTS:
-                assignments = list(itertools.product(others, repeat=n_objects - 1))
+                assignments = list(itertools.product(*others))
             else:
-                assignments = [tuple(rng.choice(others, n_objects - 1)) for _ in range(MAX_ASSIGNMENTS)]
+                assignments = [tuple(rng.choice(o) for o in others) for _ in range(MAX_ASSIGNMENTS)]
             best, best_d = None, -1.0
             for a in assignments:
                 vec = np.array([*a[:i], v, *a[i:]], dtype=np.float64)

@@ -477,6 +477,26 @@ def _cut_note(sd: SceneData, key: str, budget: str) -> str:
                    for views, asked, limit in sorted(cuts))
 
 
+def _unobserved_note(sd: SceneData) -> str:
+    """A sentence naming the levels left out of the unseen test because training never showed an object there."""
+    notes = set()
+    for m in sd.methods:
+        u = _metric(m, "unseen_combinations")
+        if not isinstance(u, dict):
+            continue
+        ranges = u.get("training_range") or {}
+        for name, levels in (u.get("levels_not_observed") or {}).items():
+            lo_hi = ranges.get(name)
+            seen = f" (training: {fmt(lo_hi[0], 2)} to {fmt(lo_hi[1], 2)})" if lo_hi else ""
+            notes.add((name, ", ".join(fmt(v, 2) for v in levels), seen, u.get("observed_within")))
+    if not notes:
+        return ""
+    parts = "; ".join(f"{escape(name)} at {levels}{seen}" for name, levels, seen, _ in sorted(notes))
+    within = fmt(next(iter(notes))[3])
+    return (f"<p>Left out of this test, as no training frame holds the object within {within} of the level (its "
+            f"appearance there was never seen, so no method could recombine it): {parts}.</p>")
+
+
 def section_unseen(sd: SceneData) -> str:
     rows = []
     for m in sd.methods:
@@ -496,7 +516,7 @@ def section_unseen(sd: SceneData) -> str:
                 "move together).</p>")
     return ("<p>Held-out poses rendered at state combinations the training never showed, against the truth "
             "renderer; 'moved' = only the pixels of the objects that moved.</p>" + none
-            + _cut_note(sd, "unseen_combinations", "max_renders")
+            + _cut_note(sd, "unseen_combinations", "max_renders") + _unobserved_note(sd)
             + table(["method", "PSNR dB", "PSNR moved dB", "SSIM", "unseen combinations", "combinations"], rows))
 
 

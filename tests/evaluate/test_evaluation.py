@@ -217,8 +217,9 @@ def test_metrics_json_is_identical_between_two_evaluations(eval_scene, tmp_path)
 def test_only_novel_combinations_are_rendered(eval_scene, tmp_path):
     ds, run, truth = eval_scene
     # training states lie on the diagonal at 1/7, 3/7, 5/7, 1: (0, 1) and (1, 0) are 0.57 away, (0.5, 0) and (0, 0.5)
-    # only 0.36, so with novelty_min 0.4 those two are recorded but must not cost a render
-    cfg = EvaluateConfig(unseen_views=2, novelty_min=0.4, save_renders=False, locality_views=0)
+    # only 0.36, so with novelty_min 0.4 those two are recorded but must not cost a render (level 0, 1/7 from the
+    # nearest training state, counts as observed here: observed_within=None)
+    cfg = EvaluateConfig(unseen_views=2, novelty_min=0.4, save_renders=False, locality_views=0, observed_within=None)
     metrics = evaluate_run(run, ds, tmp_path / "e", truth, None, cfg)
     unseen = metrics["unseen_combinations"]
     combos = {tuple(c["values"]): c["unseen"] for c in unseen["combinations"]}

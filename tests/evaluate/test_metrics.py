@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from stages.evaluate import Lpips, iou, novelty, psnr, ssim, summarize, unseen_combinations
+from stages.evaluate.unseen_states import observed_levels
 
 
 def test_psnr_of_known_noise():
@@ -100,8 +101,25 @@ def test_unseen_combinations_are_far_from_training():
 
 
 def test_unseen_combinations_scale_to_many_objects():
-    combos = unseen_combinations(10, np.zeros((5, 10)), levels=(0.0, 1.0))
+    # every object seen closed and open, always all together: each one open with the rest closed (and the reverse)
+    combos = unseen_combinations(10, np.array([np.zeros(10), np.ones(10)]), levels=(0.0, 1.0))
     assert len(combos) == 20 and all(c.unseen for c in combos)
+
+
+def test_unseen_combinations_keep_to_levels_each_object_was_seen_at():
+    # the cabinet opens fully, the drawer only half way: asking for the drawer at 1 would test an appearance the
+    # capture never showed, and the novelty search prefers exactly that level (farthest from every training state)
+    train = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.0, 0.45]])
+    assert observed_levels(train, (0.0, 0.5, 1.0)) == [[0.0, 0.5, 1.0], [0.0, 0.5]]
+    kept = unseen_combinations(2, train)
+    assert kept and all(c.values[1] != 1.0 for c in kept)
+    assert (1.0, 0.5) in [c.values for c in kept if c.unseen]  # seen apart, never together: the test's point
+    every = unseen_combinations(2, train, observed_within=None)
+    assert any(c.values[1] == 1.0 and c.unseen for c in every)
+    # an object that stays between the levels keeps the nearest one; no states at all: every level
+    assert observed_levels(np.array([[0.3], [0.35]]), (0.0, 0.5, 1.0)) == [[0.5]]
+    assert observed_levels(np.full((3, 1), np.nan), (0.0, 1.0)) == [[0.0, 1.0]]
+    assert unseen_combinations(0, np.zeros((4, 0))) == []  # a room without objects has nothing to combine
 
 
 def test_ssim_is_the_standard_gaussian_form():

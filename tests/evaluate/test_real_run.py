@@ -38,8 +38,10 @@ def test_evaluate_a_real_run_against_the_truth_renderer(real_run, tmp_path, monk
     capture, data, run = real_run
     monkeypatch.setattr("stages.language.cli.encoder_from_args", lambda args: BagOfWordsEncoder())
     out = tmp_path / "eval"
+    # the tiny capture's 4 training frames never hold an object near 0.5, and every novel vector needs one there:
+    # every level is allowed here, so that the unseen path runs (the default's record is checked below)
     code = evaluate_cli.main(["--run", str(run), "--data", str(data), "--truth", str(capture), "--out", str(out),
-                              "--max-views", "2", "--unseen-views", "1", "--scale", "0.5"])
+                              "--max-views", "2", "--unseen-views", "1", "--scale", "0.5", "--observed-within", "-1"])
     assert code == 0
     headline = json.loads(capsys.readouterr().out)
     metrics = json.loads((out / "metrics.json").read_text())
@@ -60,6 +62,7 @@ def test_evaluate_a_real_run_against_the_truth_renderer(real_run, tmp_path, monk
     unseen = metrics["unseen_combinations"]
     assert unseen["status"] == "computed" and unseen["truth_pose_source"] == ["source_index"]
     assert unseen["n_unseen"] >= 1 and unseen["seen_reference"]["psnr"]["n"] == 1
+    assert unseen["observed_within"] is None and unseen["levels_not_observed"] == {}
     for rec in unseen["records"]:
         if not rec["rendered"]:  # too close to a training state: listed, not rendered
             assert not rec["unseen"] and rec["psnr"] is None
@@ -75,6 +78,20 @@ def test_evaluate_a_real_run_against_the_truth_renderer(real_run, tmp_path, monk
     assert len(printed) == len(ground["queries"]) and all(set(v) == set(ground["sources"]) for v in printed.values())
     maps = sorted((out / "grounding").glob("*.png"))
     assert maps and all(cv2.imread(str(p), cv2.IMREAD_UNCHANGED).shape == (24, 32) for p in maps)
+
+
+def test_unseen_levels_the_capture_never_showed_are_named(real_run, tmp_path, capsys):
+    capture, data, run = real_run
+    out = tmp_path / "eval"
+    assert evaluate_cli.main(["--run", str(run), "--data", str(data), "--truth", str(capture), "--out", str(out),
+                              "--max-views", "1", "--unseen-views", "1", "--scale", "0.5", "--no-grounding",
+                              "--locality-views", "0", "--no-renders"]) == 0
+    unseen = json.loads((out / "metrics.json").read_text())["unseen_combinations"]
+    # training holds the cabinet at 0, 0.89 and 0.33, the drawer at 0, 0.03 and 1: neither near 0.5
+    assert unseen["observed_within"] == 0.125
+    assert unseen["levels_not_observed"] == {"cabinet": [0.5], "drawer": [0.5]}
+    assert unseen["training_range"]["drawer"] == [0.0, 1.0]
+    assert all(0.5 not in c["values"] for c in unseen["combinations"]) and unseen["n_unseen"] == 0
 
 
 def test_scale_outside_0_1_is_refused(real_run, tmp_path, capsys):

@@ -117,7 +117,12 @@ def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("li
                                            "ssim": {"mean": 0.6}, "records": records,
                                            # 2 of 3 poses: the room's combinations were over the render budget
                                            "views": 2, "views_asked": 3, "max_renders": 4, "views_cut": True,
-                                           "combinations": [{"unseen": True}, {"unseen": True}, {"unseen": False}]},
+                                           "combinations": [{"unseen": True}, {"unseen": True}, {"unseen": False}],
+                                           # object2 was never seen open: level 1 is left out of the test
+                                           "observed_within": 0.125,
+                                           "training_range": {"object0": [0.0, 1.0], "object1": [0.0, 1.0],
+                                                              "object2": [0.0, 0.6]},
+                                           "levels_not_observed": {"object2": [1.0]}},
                    "grounding": {"status": "computed", "threshold": 0.5, "sources": ["probs"], "queries": queries,
                                  "miou_probs": 0.5, "miou_probs_name": 0.5},
                    # the first method keeps its changes local; the others leak 3/255 onto the rest of the room

@@ -76,6 +76,8 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     assert unseen.count("2 of 3 poses: at 3, this room's objects would take more than the evaluation's budget of "
                         "4 renders") == 1  # one sentence for both methods
     assert "nothing to test here" not in unseen
+    assert unseen.count("no training frame holds the object within 0.125 of the level") == 1  # once for both methods
+    assert "object2 at 1.00 (training: 0.00 to 0.60)" in unseen
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG
