@@ -128,12 +128,14 @@ def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: s
                     raise CaptureFolderError(cap / "truth" / "images" / name, "lossless frame missing",
                                              "regenerate with write_truth_images: true, or use --images video")
             cv2.imwrite(str(tmp / "images" / name), bgr)
-            mpath = cap / "masks" / name
-            ids = cv2.imread(str(mpath), cv2.IMREAD_UNCHANGED)
-            if ids is None or ids.shape != (camera.height, camera.width):
-                raise CaptureFolderError(mpath, "id mask missing or of the wrong size",
-                                         f"regenerate the capture ({camera.width}x{camera.height} uint8 PNGs)")
-            write_mask(tmp, frame_id_of(Path(name).stem), label_map_to_onehot(id_to_channel[ids], len(objects)))
+            if objects:  # a room without movable objects gets no masks: the dataset contract pairs masks with a mapping
+                mpath = cap / "masks" / name
+                ids = cv2.imread(str(mpath), cv2.IMREAD_UNCHANGED)
+                if ids is None or ids.shape != (camera.height, camera.width):
+                    raise CaptureFolderError(mpath, "id mask missing or of the wrong size",
+                                             f"regenerate the capture ({camera.width}x{camera.height} uint8 PNGs)")
+                write_mask(tmp, frame_id_of(Path(name).stem),
+                           label_map_to_onehot(id_to_channel[ids], len(objects)))
             frames.append(Frame(file_path=f"images/{name}", c2w=np.asarray(fr["transform_matrix"], dtype=np.float64),
                                 state={k: float(v) for k, v in fr["state"].items()}, split=sp, source_index=i))
         known = {f.frame_id for f in frames}

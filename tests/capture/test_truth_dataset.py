@@ -50,3 +50,15 @@ def test_capture_dataset_refuses_to_clobber(tiny_capture, tmp_path, capsys):
     assert main(["dataset", "--capture", str(tiny_capture), "--out", str(out), "--no-progress"]) == 2
     assert "--force" in capsys.readouterr().err
     assert (out / "keep.txt").read_text() == "mine"
+
+
+def test_a_room_without_objects_gives_a_dataset_without_masks(small_spec, tmp_path):
+    """A static room (no movable objects) is a valid dataset: no masks, no mapping (masks need a mapping)."""
+    from stages.capture import capture_to_dataset, generate_capture
+
+    spec = small_spec(n_frames=4)
+    spec.objects = []
+    capture = generate_capture(spec, tmp_path / "capture", progress=False)
+    ds = capture_to_dataset(capture, tmp_path / "ds", progress=False)
+    validate_scene(read_scene(tmp_path / "ds"), deep=True)
+    assert ds.objects == [] and len(ds.frames) == 4 and not (tmp_path / "ds" / "masks").exists()
