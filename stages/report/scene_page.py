@@ -513,7 +513,7 @@ def section_unseen(sd: SceneData) -> str:
     if all(r[4] == 0 for r in rows):  # e.g. one object: every state it takes is a training state
         none = ("<p>No candidate state vector is unseen: the training frames already show each of them (or one "
                 "close to it), so this room has nothing to test here (a single object, or objects that only ever "
-                "move together).</p>")
+                "move together; or no movable object at all).</p>")
     return ("<p>Held-out poses rendered at state combinations the training never showed, against the truth "
             "renderer; 'moved' = only the pixels of the objects that moved.</p>" + none
             + _cut_note(sd, "unseen_combinations", "max_renders") + _unobserved_note(sd)
