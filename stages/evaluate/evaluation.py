@@ -108,12 +108,6 @@ def _cut(views: int, asked: int, available: int) -> bool:
     return min(views, available) < min(asked, available)
 
 
-def _range(states: np.ndarray) -> list[float] | None:
-    """[min, max] of one object's training states (None when no frame has one)."""
-    finite = states[np.isfinite(states)]
-    return [float(finite.min()), float(finite.max())] if finite.size else None
-
-
 def _to_png(path: Path, rgb: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     img = np.clip(np.asarray(rgb, dtype=np.float64) * 255.0 + 0.5, 0, 255).astype(np.uint8)
@@ -337,7 +331,7 @@ class Evaluator:
             "levels": list(cfg.levels),
             "novelty_min": cfg.novelty_min,
             "observed_within": cfg.observed_within,
-            "training_range": {o: _range(train_states[:, k]) for k, o in enumerate(objects)},
+            "training_range": self.ds.state_ranges(self.ds.frames_in("train")),
             "levels_not_observed": {o: [v for v in cfg.levels if v not in observed[o]] for o in objects
                                     if len(observed[o]) < len(cfg.levels)},
             "views": len(views), "views_asked": cfg.unseen_views, "max_renders": cfg.max_unseen_renders,

@@ -21,12 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stages.scene.dataset import STATE_SEEN_WITHIN
+
 MAX_ASSIGNMENTS = 512
 """Above this many assignments of the other objects, a seeded random subset is searched instead."""
 
-OBSERVED_WITHIN = 0.125
+OBSERVED_WITHIN = STATE_SEEN_WITHIN
 """A level counts as observed for an object when a training frame holds the object within this distance of it
-(half the least novelty of an unseen combination)."""
+(half the least novelty of an unseen combination, 0.25)."""
 
 
 @dataclass(frozen=True)

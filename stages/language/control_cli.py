@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
+from typing import Any
 
 import yaml
 
-from stages.scene import InputError
+from stages.scene import InputError, SceneDataset
 from stages.scene.cli_errors import cli_errors
+from stages.scene.dataset import STATE_SEEN_WITHIN
 
 from .cli import add_encoder_arguments, encoder_from_args
 
@@ -51,6 +54,18 @@ def _parse_states(items: list[str]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError as exc:
             raise InputError("--state", f"{item!r} is not OBJECT=VALUE", "write e.g. --state fridge=0.5") from exc
+    return out
+
+
+def _beyond_training(ds: SceneDataset, states: dict[str, float]) -> dict[str, dict[str, Any]]:
+    """Objects set farther than ``STATE_SEEN_WITHIN`` from every state of the training frames (a drawer the capture
+    only half opened, asked to open fully), with the state and the training range."""
+    ranges = ds.state_ranges(ds.frames_in("train") or ds.frames)
+    out = {}
+    for name, value in states.items():
+        lo_hi = ranges.get(name)
+        if lo_hi and not lo_hi[0] - STATE_SEEN_WITHIN <= value <= lo_hi[1] + STATE_SEEN_WITHIN:
+            out[name] = {"state": value, "training_range": lo_hi}
     return out
 
 
@@ -103,6 +118,14 @@ def _control(args: argparse.Namespace) -> int:
     report = result.to_json(vocabulary.objects)
     report["command"] = args.command
 
+    if ds is not None:
+        beyond = _beyond_training(ds, result.states)
+        if beyond:
+            report["beyond_training"] = beyond
+            for name, b in beyond.items():
+                lo, hi = b["training_range"]
+                print(f"note: {name} at {b['state']:.2f} is beyond the states its training frames show "
+                      f"({lo:.2f} to {hi:.2f}): the render extrapolates", file=sys.stderr)
     if args.run:
         assert ds is not None and frame is not None
         import cv2

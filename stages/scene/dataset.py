@@ -51,6 +51,10 @@ SPLIT_KEYS = {"train_filenames": "train", "val_filenames": "test", "test_filenam
 training and on ``test`` in ``ns-eval``, so both name the held-out frames."""
 
 
+STATE_SEEN_WITHIN = 0.125
+"""A state counts as seen for an object when a frame holds the object within this distance of it: the
+evaluation's unseen combinations use only such levels, and ``livescene control`` names a state beyond them."""
+
 @dataclass
 class Frame:
     """One posed image of the capture."""
@@ -153,6 +157,15 @@ class SceneDataset:
                 for j, name in enumerate(self.objects):
                     if name in f.state:
                         out[i, j] = f.state[name]
+        return out
+
+    def state_ranges(self, frames: list[Frame] | None = None) -> dict[str, list[float] | None]:
+        """Per object, ``[min, max]`` of its states over ``frames`` (all by default); None where none has one."""
+        matrix = self.state_matrix(frames)
+        out: dict[str, list[float] | None] = {}
+        for name, column in zip(self.objects, matrix.T, strict=True):
+            finite = column[np.isfinite(column)]
+            out[name] = [float(finite.min()), float(finite.max())] if finite.size else None
         return out
 
 

@@ -66,6 +66,15 @@ def test_control_with_a_run_renders_the_result(tiny_dataset, tmp_path, monkeypat
     assert img.shape == (12, 16, 3) and int(img[0, 0, 0]) == 128
 
 
+def test_control_names_a_state_beyond_the_training_frames(tiny_dataset):
+    # the capture only half opened object0: asked for 1, the render extrapolates, and control says so
+    for k, f in enumerate(tiny_dataset.frames_in("train")):
+        f.state = {"object0": 0.4 * (k % 2), "object1": float(k % 2), "object2": float(k % 2)}
+    beyond = control_cli._beyond_training(tiny_dataset, {"object0": 1.0, "object1": 1.0, "object2": 0.5})
+    assert beyond == {"object0": {"state": 1.0, "training_range": [0.0, 0.4]}}
+    assert control_cli._beyond_training(tiny_dataset, {"object0": 0.5, "object1": 0.0, "object2": 1.0}) == {}
+
+
 def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsys, encoder):
     monkeypatch.setattr(language_cli, "encoder_from_args", lambda args: encoder)
     assert language_cli.main(["query", "--data", str(tiny_dataset.root), "thing zero"]) == 0
