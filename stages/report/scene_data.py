@@ -205,7 +205,19 @@ def _dataset_info(data: Path) -> dict | None:
             "train": sum(1 for f in frames if f.get("split") == "train"),
             "test": sum(1 for f in frames if f.get("split") == "test"),
             "width": transforms.get("w"), "height": transforms.get("h"),
-            "objects": [str(mapping[k]) for k in sorted(mapping)] if mapping else []}
+            "objects": [str(mapping[k]) for k in sorted(mapping)] if mapping else [],
+            "state_ranges": _training_state_ranges(data)}
+
+
+def _training_state_ranges(data: Path) -> dict[str, list[float] | None]:
+    """Per object, [min, max] of its state over the training frames; {} where the dataset does not read."""
+    from stages.scene import SceneError, read_scene
+
+    try:
+        ds = read_scene(data, validate=False)
+    except (SceneError, InputError):
+        return {}
+    return ds.state_ranges(ds.frames_in("train") or ds.frames)
 
 
 def collect_method(name: str, inputs: ReportInputs) -> MethodData:

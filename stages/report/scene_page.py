@@ -10,6 +10,8 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
+from stages.scene.dataset import STATE_SEEN_WITHIN
+
 from .export_section import section_export
 from .html_parts import fmt, missing, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
@@ -399,9 +401,18 @@ def section_grid(sd: SceneData, views: int) -> str:
             + table(head, rows, cls="grid"))
 
 
+def _beyond_note(obj: str, lo_hi: list[float] | None) -> str:
+    """A line above an object's slider when its training frames do not reach both ends of the state range."""
+    if not lo_hi or (lo_hi[0] <= STATE_SEEN_WITHIN and lo_hi[1] >= 1.0 - STATE_SEEN_WITHIN):
+        return ""
+    return (f'<p class="note">The training frames hold {escape(obj)} between {lo_hi[0]:.2f} and {lo_hi[1]:.2f}: '
+            f"beyond that the renders extrapolate.</p>")
+
+
 def section_sliders(sd: SceneData) -> tuple[str, dict[str, list[str]]]:
     """The slider HTML and the image lists the page script swaps between."""
     blocks, images = [], {}
+    ranges = (sd.dataset_info or {}).get("state_ranges") or {}
     for m in sd.methods:
         if m.sweep is None or m.sweep_dir is None:
             continue
@@ -412,6 +423,7 @@ def section_sliders(sd: SceneData) -> tuple[str, dict[str, list[str]]]:
             uris = [file_data_uri(m.sweep_dir / f) or "" for f in entry["images"]]
             images[key] = uris
             values = entry["values"]
+            blocks.append(_beyond_note(obj, ranges.get(obj)))
             blocks.append(
                 f'<div class="slider"><label>{escape(obj)} state: <input type="range" class="sweep" min="0" '
                 f'max="{len(uris) - 1}" step="1" value="0" data-target="{key}" '

@@ -78,6 +78,12 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     assert "nothing to test here" not in unseen
     assert unseen.count("no training frame holds the object within 0.125 of the level") == 1  # once for both methods
     assert "object2 at 1.00 (training: 0.00 to 0.60)" in unseen
+    # the tiny dataset's training frames hold object0 between 0.01 and 0.48: its slider says the rest extrapolates
+    sliders = html.split('<section id="sliders">')[1].split("</section>")[0]
+    ranges = tiny_dataset.state_ranges(tiny_dataset.frames_in("train"))
+    assert ranges["object0"][1] < 0.5
+    assert (f"The training frames hold object0 between {ranges['object0'][0]:.2f} and {ranges['object0'][1]:.2f}: "
+            "beyond that the renders extrapolate.") in sliders
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG
