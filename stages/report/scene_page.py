@@ -10,7 +10,7 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from stages.scene.dataset import STATE_SEEN_WITHIN
+from stages.scene.dataset import spans_closed_to_open
 
 from .export_section import section_export
 from .html_parts import fmt, missing, page, table
@@ -403,7 +403,7 @@ def section_grid(sd: SceneData, views: int) -> str:
 
 def _beyond_note(obj: str, lo_hi: list[float] | None) -> str:
     """A line above an object's slider when its training frames do not reach both ends of the state range."""
-    if not lo_hi or (lo_hi[0] <= STATE_SEEN_WITHIN and lo_hi[1] >= 1.0 - STATE_SEEN_WITHIN):
+    if lo_hi is None or spans_closed_to_open(lo_hi):
         return ""
     return (f'<p class="note">The training frames hold {escape(obj)} between {lo_hi[0]:.2f} and {lo_hi[1]:.2f}: '
             f"beyond that the renders extrapolate.</p>")

@@ -55,6 +55,12 @@ STATE_SEEN_WITHIN = 0.125
 """A state counts as seen for an object when a frame holds the object within this distance of it: the
 evaluation's unseen combinations use only such levels, and ``livescene control`` names a state beyond them."""
 
+
+def spans_closed_to_open(lo_hi: list[float] | None) -> bool:
+    """Whether an object's ``[min, max]`` of states comes within ``STATE_SEEN_WITHIN`` of both 0 and 1 (True when
+    unknown): where not, the report's slider and the viewer's say that renders beyond it extrapolate."""
+    return lo_hi is None or (lo_hi[0] <= STATE_SEEN_WITHIN and lo_hi[1] >= 1.0 - STATE_SEEN_WITHIN)
+
 @dataclass
 class Frame:
     """One posed image of the capture."""

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from stages.scene import InputError, SceneDataset
+from stages.scene.dataset import spans_closed_to_open
 
 from .client_session import ClientSession
 from .frame_renderer import FrameRenderer
@@ -41,6 +42,14 @@ FRUSTUM_LINE_PX = 1.5
 THUMBNAIL_WIDTH = 64
 MAX_THUMBNAILS = 400
 """Frustums carry a small image of their frame up to this many frames (each costs a read at start-up)."""
+
+
+def slider_hint(name: str, lo_hi: list[float] | None) -> str:
+    """An object slider's tooltip; it names the training frames' range when they do not reach both ends."""
+    hint = f"state of {name}: 0 closed, 1 open"
+    if lo_hi is not None and not spans_closed_to_open(lo_hi):
+        hint += f"; the training frames show {lo_hi[0]:.2f} to {lo_hi[1]:.2f} (beyond, the render extrapolates)"
+    return hint
 
 
 @dataclass(frozen=True)
@@ -155,10 +164,11 @@ class LiveViewer:
     def _add_gui(self) -> None:
         gui = self.server.gui
         self.sliders: dict[str, Any] = {}
+        ranges = self.dataset.state_ranges(self.dataset.frames_in("train") or self.dataset.frames)
         with gui.add_folder("Object states"):
             for name in self.objects:
                 slider = gui.add_slider(name, min=0.0, max=1.0, step=0.01, initial_value=round(self._states[name], 2),
-                                        hint=f"state of {name}: 0 closed, 1 open")
+                                        hint=slider_hint(name, ranges.get(name)))
                 slider.on_update(self._slider_moved(name))
                 self.sliders[name] = slider
         with gui.add_folder("Language"):
