@@ -300,7 +300,7 @@ class TrainConfig:
     compile_mode: Literal["default", "reduce-overhead"] = "default"
     """With ``compile``: torch.compile's mode. ``reduce-overhead`` replays each field's kernels as CUDA graphs
     (static shapes: one graph per distinct batch shape), which saves the launch cost of a step whose device
-    work is shorter than its dispatch; on the CPU it is the default mode."""
+    work is shorter than its dispatch; on the CPU it only compiles for static shapes (no graphs there)."""
 
 
 @dataclass
