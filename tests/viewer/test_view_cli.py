@@ -70,3 +70,14 @@ def test_the_viewer_starts_prints_its_address_and_stops(capsys, viewer_scene):
     assert code == 0
     assert re.search(r"livescene view: http://127\.0\.0\.1:\d+/ +\(2 objects: cabinet, drawer; full resolution "
                      r"12288 pixels; Ctrl-C stops\)", out)
+
+
+def test_slider_hint_names_a_range_the_training_frames_do_not_span():
+    from stages.scene.dataset import spans_closed_to_open
+    from stages.viewer.server import slider_hint
+
+    assert slider_hint("fridge", [0.0, 1.0]) == "state of fridge: 0 closed, 1 open"
+    assert slider_hint("fridge", None) == "state of fridge: 0 closed, 1 open"  # learned states: no range
+    assert slider_hint("drawer", [0.0, 0.5]).endswith("the training frames show 0.00 to 0.50 (beyond, the render "
+                                                      "extrapolates)")
+    assert spans_closed_to_open([0.1, 0.9]) and not spans_closed_to_open([0.2, 1.0])
