@@ -35,7 +35,9 @@ EVALUATE_VERSION = 6
 budget cut them (a room of many objects: ``max_unseen_renders``, ``max_locality_pairs``; a test split with
 fewer frames than asked also gives fewer poses, not cut).
 5: held-out mean accumulation over object pixels and over static pixels (``accumulation_objects``,
-``accumulation_static``): the report's trust check on objects painted behind themselves."""
+``accumulation_static``): the report's trust check on objects painted behind themselves.
+6: unseen combinations take each object only at levels the training showed it at (``observed_within``);
+``training_range`` and ``levels_not_observed`` say what was left out."""
 
 
 @dataclass
