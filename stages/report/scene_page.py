@@ -554,9 +554,21 @@ def section_locality(sd: SceneData) -> str:
             f"state, dilated 2 px) and inside it. Control is local when the outside change stays at most "
             f"{fmt(limit)} and the inside change is larger. The truth renderer's own change is shown for "
             f"reference.</p>"
-            + _cut_note(sd, "locality", "max_pairs")
+            + _cut_note(sd, "locality", "max_pairs") + _partial_range_note(sd)
             + table(["method", "object", "model outside", "truth outside", "model inside", "truth inside", "views",
                      "verdict"], rows))
+
+
+def _partial_range_note(sd: SceneData) -> str:
+    """A sentence naming objects whose training frames do not reach 0 and 1, whose test states then extrapolate."""
+    ranges = (sd.dataset_info or {}).get("state_ranges") or {}
+    partial = [f"{escape(name)} ({lo_hi[0]:.2f} to {lo_hi[1]:.2f})" for name, lo_hi in sorted(ranges.items())
+               if lo_hi is not None and not spans_closed_to_open(lo_hi)]
+    if not partial:
+        return ""
+    return ("<p>The training frames do not take every object from closed to open: " + "; ".join(partial)
+            + ". For those the test's states beyond that range are extrapolations: a leak outside the object "
+              "still counts against control, but the inside change is the model's guess.</p>")
 
 
 def section_commands(sd: SceneData) -> str:

@@ -72,6 +72,8 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     locality = html.split('<section id="locality">')[1].split("</section>")[0]
     assert locality.count(">local<") == 3 and locality.count(">not local<") == 3  # 3 objects x 2 methods
     assert "poses:" not in locality  # all the poses asked for: no note
+    # the tiny dataset's training frames hold object0 at 0.01-0.48, object1 and object2 short of 1 as well
+    assert "The training frames do not take every object from closed to open: object0 (0.01 to 0.48)" in locality
     unseen = html.split('<section id="unseen">')[1].split("</section>")[0]
     assert unseen.count("2 of 3 poses: at 3, this room's objects would take more than the evaluation's budget of "
                         "4 renders") == 1  # one sentence for both methods
