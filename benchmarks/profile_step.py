@@ -13,25 +13,16 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from demo_dataset import DEMO_SPEC, cached_demo_dataset
-from train_throughput import bench_config, language_targets
+from train_throughput import add_run_arguments, bench_config, bench_inputs
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_run_arguments(p)
     p.add_argument("--method", default="livescene")
-    p.add_argument("--preset", default="cpu-demo")
-    p.add_argument("--device", default="cpu")
-    p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
     p.add_argument("--language", action="store_true", help="train with the language table")
     p.add_argument("--steps", type=int, default=5, help="profiled steps")
-    p.add_argument("--warmup", type=int, default=10)
-    p.add_argument("--start-step", type=int, default=300)
     p.add_argument("--rows", type=int, default=25)
-    p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
-    p.add_argument("--capture", type=Path, default=DEMO_SPEC)
-    p.add_argument("--work", type=Path, default=None)
     p.add_argument("--out", type=Path, default=None, help="write the whole table here")
     args = p.parse_args()
 
@@ -40,11 +31,7 @@ def main() -> int:
 
     from stages.model.trainer import Trainer
 
-    if args.work is None:
-        args.work = Path(tempfile.gettempdir()) / f"livescene-bench-{args.capture.stem}"
-    args.work.mkdir(parents=True, exist_ok=True)
-    _, dataset = cached_demo_dataset(args.work, spec=args.capture)
-    targets = language_targets(args.work, dataset)
+    dataset, targets = bench_inputs(args)
     args.warmup = max(args.warmup, 1)
     args.steps = max(args.steps, 1)
     cfg = bench_config(args, args.method, args.language, dataset, targets)

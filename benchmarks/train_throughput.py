@@ -63,6 +63,33 @@ LANGUAGE_SETTINGS = {"both": [False, True], "on": [True], "off": [False]}
 """--language -> the language settings measured per method."""
 
 
+def add_run_arguments(p: argparse.ArgumentParser) -> None:
+    """The options that build a measured trainer, shared with ``profile_step.py``."""
+    p.add_argument("--preset", default="cpu-demo")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
+    p.add_argument("--warmup", type=int, default=10)
+    p.add_argument("--start-step", type=int, default=300,
+                   help="step counter the timed steps start from (after cpu-demo's 200-step proposal warm-up, the "
+                        "proposal fields get gradients every 5th step)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
+    p.add_argument("--capture", type=Path, default=DEMO_SPEC,
+                   help="capture spec to train on (default: the demo's); e.g. config/captures/kitchen.yaml for four "
+                        "objects, where MK-Planes has 21 planes per scale")
+    p.add_argument("--work", type=Path, default=None,
+                   help="where the capture and its dataset are cached (default: a temp folder named after the spec)")
+
+
+def bench_inputs(args: argparse.Namespace) -> tuple[Path, Path]:
+    """(truth dataset, language targets) of ``--capture``, made once in ``--work``."""
+    if args.work is None:
+        args.work = Path(tempfile.gettempdir()) / f"livescene-bench-{args.capture.stem}"
+    args.work.mkdir(parents=True, exist_ok=True)
+    _, dataset = cached_demo_dataset(args.work, spec=args.capture)
+    return dataset, language_targets(args.work, dataset)
+
+
 def bench_config(args: argparse.Namespace, method: str, with_language: bool, dataset: Path, targets: Path):
     """The run config of one measured configuration: the preset, no evaluation or checkpoints, enough steps."""
     from stages.model import load_config
@@ -199,24 +226,11 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_run_arguments(p)
     p.add_argument("--methods", nargs="+", default=METHODS)
-    p.add_argument("--preset", default="cpu-demo")
-    p.add_argument("--device", default="cpu")
-    p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
     p.add_argument("--steps", type=int, default=60, help="timed steps (the median is reported)")
-    p.add_argument("--warmup", type=int, default=10)
     p.add_argument("--rounds", type=int, default=2, help="passes over every configuration (the fastest is kept)")
-    p.add_argument("--start-step", type=int, default=300,
-                   help="step counter the timed steps start from (after cpu-demo's 200-step proposal warm-up, the "
-                        "proposal fields get gradients every 5th step)")
     p.add_argument("--language", choices=["both", "on", "off"], default="both")
-    p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
-    p.add_argument("--capture", type=Path, default=DEMO_SPEC,
-                   help="capture spec to train on (default: the demo's); e.g. config/captures/kitchen.yaml for four "
-                        "objects, where MK-Planes has 21 planes per scale")
-    p.add_argument("--work", type=Path, default=None,
-                   help="where the capture and its dataset are cached (default: a temp folder named after the spec)")
     p.add_argument("--paired", action="store_true",
                    help="one process, one step of each configuration in turn (step time ratios that the machine's "
                         "drift does not move; no ops, syncs or peak memory columns)")
@@ -230,11 +244,7 @@ def main() -> int:
         args.language = args.with_language
         print(json.dumps(measure_one(args)), flush=True)
         return 0
-    if args.work is None:
-        args.work = Path(tempfile.gettempdir()) / f"livescene-bench-{args.capture.stem}"
-    args.work.mkdir(parents=True, exist_ok=True)
-    _, dataset = cached_demo_dataset(args.work, spec=args.capture)
-    targets = language_targets(args.work, dataset)
+    dataset, targets = bench_inputs(args)
     if args.paired:
         return measure_paired(args, dataset, targets)
     settings = LANGUAGE_SETTINGS[args.language]

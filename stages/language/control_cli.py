@@ -60,7 +60,7 @@ def _parse_states(items: list[str]) -> dict[str, float]:
 def _beyond_training(ds: SceneDataset, states: dict[str, float]) -> dict[str, dict[str, Any]]:
     """Objects set farther than ``STATE_SEEN_WITHIN`` from every state of the training frames (a drawer the capture
     only half opened, asked to open fully), with the state and the training range."""
-    ranges = ds.state_ranges(ds.frames_in("train") or ds.frames)
+    ranges = ds.state_ranges()
     out = {}
     for name, value in states.items():
         lo_hi = ranges.get(name)

@@ -217,7 +217,7 @@ def _training_state_ranges(data: Path) -> dict[str, list[float] | None]:
         ds = read_scene(data, validate=False)
     except (SceneError, InputError):
         return {}
-    return ds.state_ranges(ds.frames_in("train") or ds.frames)
+    return ds.state_ranges()
 
 
 def collect_method(name: str, inputs: ReportInputs) -> MethodData:

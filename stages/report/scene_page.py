@@ -504,7 +504,7 @@ def _unobserved_note(sd: SceneData) -> str:
     if not notes:
         return ""
     parts = "; ".join(f"{escape(name)} at {levels}{seen}" for name, levels, seen, _ in sorted(notes))
-    within = fmt(next(iter(notes))[3])
+    within = fmt(sorted(notes)[0][3])
     return (f"<p>Left out of this test, as no training frame holds the object within {within} of the level (its "
             f"appearance there was never seen, so no method could recombine it): {parts}.</p>")
 

@@ -166,8 +166,9 @@ class SceneDataset:
         return out
 
     def state_ranges(self, frames: list[Frame] | None = None) -> dict[str, list[float] | None]:
-        """Per object, ``[min, max]`` of its states over ``frames`` (all by default); None where none has one."""
-        matrix = self.state_matrix(frames)
+        """Per object, ``[min, max]`` of its states over ``frames``, by default the training frames (all frames
+        where none is marked train); None where none has one."""
+        matrix = self.state_matrix((self.frames_in("train") or self.frames) if frames is None else frames)
         out: dict[str, list[float] | None] = {}
         for name, column in zip(self.objects, matrix.T, strict=True):
             finite = column[np.isfinite(column)]

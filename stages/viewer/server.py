@@ -164,7 +164,7 @@ class LiveViewer:
     def _add_gui(self) -> None:
         gui = self.server.gui
         self.sliders: dict[str, Any] = {}
-        ranges = self.dataset.state_ranges(self.dataset.frames_in("train") or self.dataset.frames)
+        ranges = self.dataset.state_ranges()
         with gui.add_folder("Object states"):
             for name in self.objects:
                 slider = gui.add_slider(name, min=0.0, max=1.0, step=0.01, initial_value=round(self._states[name], 2),
