@@ -15,6 +15,8 @@ from pathlib import Path
 
 from train_throughput import add_run_arguments, bench_config, bench_inputs
 
+from stages.scene.machine import machine_info, machine_line
+
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -54,7 +56,8 @@ def main() -> int:
     averages = prof.key_averages()
     sort = "self_device_time_total" if cuda else "self_cpu_time_total"
     print(f"\n{args.method}, language {'on' if args.language else 'off'}, preset {args.preset}, {args.device}, "
-          f"{cfg.train.batch_rays} rays, {args.steps} profiled steps (times are totals over them)\n")
+          f"{cfg.train.batch_rays} rays, {args.steps} profiled steps (times are totals over them)\n"
+          f"machine: {machine_line(machine_info(args.device))}\n")
     print(averages.table(sort_by=sort, row_limit=args.rows, max_name_column_width=60))
     if cuda:
         kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]

@@ -28,6 +28,8 @@ from pathlib import Path
 from demo_dataset import ROOT, cached_demo_dataset
 from train_throughput import language_targets
 
+from stages.scene.machine import machine_info
+
 
 def trained_run(work: Path, dataset: Path, steps: int) -> Path:
     run = work / f"run-livescene-{steps}"
@@ -88,7 +90,8 @@ def main() -> int:
     out = {"run": str(run_dir), "steps": run.step, "threads": torch.get_num_threads(), "device": args.device,
            "render_chunk": run.config.train.render_chunk, **results, "training_rays_per_s": train,
            "render_over_training": round(results["rgb"]["rays_per_s"] / train, 2) if train else None,
-           "load_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)]}
+           "load_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)],
+           "machine": machine_info(args.device)}
     print(json.dumps(out, indent=2))
     return 0
 

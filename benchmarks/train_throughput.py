@@ -47,6 +47,8 @@ from pathlib import Path
 
 from demo_dataset import DEMO_SPEC, ROOT, cached_demo_dataset
 
+from stages.scene.machine import machine_info, machine_line
+
 METHODS = ["livescene", "mk-planes", "conerf"]
 
 
@@ -162,7 +164,7 @@ def measure_one(args: argparse.Namespace) -> dict:
         "step_ms": round(step_s * 1000, 1), "rays_per_s": round(cfg.train.batch_rays / step_s),
         "ops": None if ops is None else int(sum(ops.values())), "syncs": int(sum(syncs.values())),
         "sync_calls": dict(syncs),
-        "peak_mib": round(peak, 1), "peak_kind": kind,
+        "peak_mib": round(peak, 1), "peak_kind": kind, "machine": machine_line(machine_info(str(device))),
     }
 
 
@@ -204,7 +206,8 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
     for f in folders:
         f.cleanup()
     print(f"\npaired: capture {args.capture.stem}, {args.device}, {torch.get_num_threads()} threads, preset "
-          f"{args.preset}, {args.steps} rounds of one step per configuration, load {load0:.2f}-{load1:.2f}\n")
+          f"{args.preset}, {args.steps} rounds of one step per configuration, load {load0:.2f}-{load1:.2f}\n"
+          f"machine: {machine_line(machine_info(args.device))}\n")
     print("| method | language | step ms (median) | rays/s |")
     print("|---|---|---|---|")
     rays = next(iter(trainers.values())).config.train.batch_rays
@@ -274,7 +277,7 @@ def main() -> int:
     rows = list(rows.values())
     head = rows[0]
     print(f"\ncapture {args.capture.stem}, {head['device']}, {head['threads']} threads, {head['rays']} rays per step, "
-          f"preset {args.preset}\n")
+          f"preset {args.preset}\nmachine: {head['machine']}\n")
     print("| method | language | step ms | rays/s | ops/step | host syncs/step | peak MiB | load |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:

@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from stages.frames.selection import downscale_factor
 from stages.scene import Camera, Frame, InputError, SceneDataset, SceneError, atomic_dir, write_json
+from stages.scene.machine import machine_info
 
 from .locality import locality
 from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
@@ -479,6 +480,7 @@ class Evaluator:
         self.timings.setdefault("unseen_combinations", {})["seconds"] = t2 - t1
         self.timings["grounding"] = {"seconds": t3 - t2}
         self.timings["seconds"] = t4 - t0  # every part, locality included
+        self.timings["machine"] = machine_info(str(getattr(self.run, "device", "cpu")))
         return {
             "evaluate_version": EVALUATE_VERSION,
             "dataset": str(self.ds.root),

@@ -7,7 +7,8 @@ Every method of the registry trains here. A run folder holds::
     train_log.csv            wall_s, step, lr, loss, each term, eval_psnr and eval_miou (periodic), rays_per_s
     model.pt                 final weights + what load_run needs (written last)
     exposure.json            with ``model.appearance.mode: measured``: every frame's measured log gains
-    run.json                 method, parameters, peak memory, train seconds, steps, device, objects, normalisation
+    run.json                 method, parameters, peak memory, train seconds and the machine, steps, device, objects,
+                             normalisation
 
 Resuming restores the RNG states of torch, numpy, Python and both samplers'
 generators, so on the CPU a resumed run is bit-identical to an uninterrupted one.
@@ -33,6 +34,7 @@ from tqdm import tqdm
 
 from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
 from stages.scene.exposure import read_exposure
+from stages.scene.machine import machine_info
 
 from .allocator import keep_freed_memory
 from .appearance_choice import EXPOSURE_FILE, resolve_appearance
@@ -619,6 +621,7 @@ class Trainer:
                                           if self.device.type == "cuda" else ""),
             "mixed_precision": str(self.amp_dtype).replace("torch.", "") if self.amp_dtype else "off",
             "torch_threads": torch.get_num_threads(),
+            "machine": machine_info(str(self.device)),
             "params": self.parameter_counts(),
             "peak_memory_mib": round(peak_memory_mib(self.device), 1),
             "peak_memory_kind": "cuda max_memory_allocated" if self.device.type == "cuda" else "process max RSS",

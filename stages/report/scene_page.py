@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from stages.scene.dataset import spans_closed_to_open
+from stages.scene.machine import machine_line
 
 from .export_section import section_export
 from .html_parts import fmt, missing, page, table
@@ -223,6 +224,18 @@ APPEARANCE_WORDS = {"affine": "a colour correction learned per training frame",
                     "none": "the images as they are"}
 
 
+def _machines_note(sd: SceneData) -> str:
+    """The machine(s) the runs' wall times come from (run.json): the same steps take 2-3x longer on a slower CPU."""
+    said: dict[str, list[str]] = defaultdict(list)
+    for m in sd.methods:
+        machine = (m.run or {}).get("machine")
+        if isinstance(machine, dict) and machine.get("cpu"):
+            said[machine_line(machine)].append(m.name)
+    if len(said) == 1:
+        return f" Training ran on {escape(next(iter(said)))}."
+    return "".join(f" {escape(', '.join(names))} trained on {escape(line)}." for line, names in said.items())
+
+
 def _exposure_note(sd: SceneData) -> str:
     """How the runs treated the frames' exposure, when it was not left alone (docs/model.md, "Exposure")."""
     said: dict[str, list[str]] = defaultdict(list)  # what was done -> methods: said once for all that did it
@@ -268,7 +281,7 @@ def section_methods(sd: SceneData) -> str:
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names, held-out accumulation "
             "over object pixels: objects mostly transparent are painted on what lies behind them) or whose "
             "training did not complete is flagged, and its numbers are not results. "
-            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd)
+            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd) + _machines_note(sd)
             + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}." for why, names in lpips_missing.items())
             + "</p>"
             + _flag_banner(flags)
@@ -357,7 +370,7 @@ def section_curves(sd: SceneData) -> str:
     loss_by_step = [Series(m.name, m.step_curve[2], m.step_curve[3]) for m in sd.methods if m.step_curve[2]]
     return ("<p>Periodic held-out PSNR logged during training (higher PSNR = lower error), every method on one "
             "plot: against optimisation steps (the fair axis when every method trains the same steps), then "
-            "against wall-clock seconds (which also measure the machine and its load).</p>"
+            "against wall-clock seconds (which also measure the machine and its load)." + _machines_note(sd) + "</p>"
             + line_plot_svg(by_step, x_label="training step", y_label="eval PSNR (dB)",
                             title="held-out error against steps")
             + line_plot_svg(loss_by_step, x_label="training step", y_label="training loss",

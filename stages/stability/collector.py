@@ -20,6 +20,8 @@ from typing import Any
 
 import pytest
 
+from stages.scene.machine import machine_info
+
 SUMMARY_FORMAT = 1
 """Version of the summary JSON (the report reads it; bump it only with the report)."""
 
@@ -223,7 +225,7 @@ class SummaryCollector:
             "quick": self.quick,
             "counts": {k: counts.get(k, 0) for k in ("pass", "fail", "error", "skip")},
             "seconds": round(self._seconds, 1),
-            "machine": {"python": platform.python_version(), "torch": torch.__version__ if torch else None,
-                        "cuda": cuda, "threads": self.threads},
+            "machine": {**machine_info(), "python": platform.python_version(),
+                        "torch": torch.__version__ if torch else None, "cuda": cuda, "threads": self.threads},
             "cases": [r.to_dict() for r in self.rows],
         }

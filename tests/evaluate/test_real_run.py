@@ -51,6 +51,7 @@ def test_evaluate_a_real_run_against_the_truth_renderer(real_run, tmp_path, monk
     assert held["image_size"] == [32, 24] and held["psnr"]["n"] == 2 and held["lpips_status"].startswith("not")
     timings = json.loads((out / "timings.json").read_text())
     assert timings["held_out"]["fps"] > 0 and headline["fps"] == pytest.approx(timings["held_out"]["fps"])
+    assert timings["machine"]["cpu"] and "torch_cpu_capability" in timings["machine"]  # what the fps was measured on
     assert headline["psnr"] == pytest.approx(held["psnr"]["mean"])
     # the per-view PSNR is that of the PNG written for the report against the area-downscaled dataset image
     view = held["views"][0]

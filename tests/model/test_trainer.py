@@ -57,6 +57,9 @@ def test_run_files_log_columns_and_run_json(trained_run):
     assert run["params"]["total"] == sum(v for k, v in run["params"].items() if k != "total")
     assert run["peak_memory_mib"] > 0 and run["train_seconds"] > 0
     assert run["objects"] == ["object0", "object1", "object2"]
+    # the wall time comes with the machine it was measured on
+    machine = run["machine"]
+    assert machine["cpu"] and machine["logical_cores"] >= 1 and machine["torch"] == torch.__version__
     with (trained_run / "train_log.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 4

@@ -71,7 +71,9 @@ def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("li
         run.mkdir(parents=True)
         (run / "run.json").write_text(json.dumps({"method": m, "status": "completed", "train_seconds": 150.0,
                                                   "steps": 400 + k, "eval_psnr": 20.0 + k, "peak_memory_mib": 800.0,
-                                                  "params": {"total": 1_000_000 + k}}))
+                                                  "params": {"total": 1_000_000 + k},
+                                                  "machine": {"cpu": "Test CPU @ 2.50GHz", "logical_cores": 2,
+                                                              "torch": "2.13.0", "torch_cpu_capability": "AVX2"}}))
         # the first method's config carries trust floors it passes; the others' have no trust section (an older
         # run), so the TrustConfig defaults apply and flag their 400 steps as undertrained
         config = {"method": m, "seed": 0}

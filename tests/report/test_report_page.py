@@ -89,6 +89,9 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG
+    curves = html.split('<section id="curves">')[1].split("</section>")[0]
+    # wall times name their machine (run.json): the same steps take 2-3x longer on a slower CPU
+    assert "Training ran on Test CPU @ 2.50GHz, 2 logical cores, torch 2.13.0 (AVX2)." in curves
     methods = html.split('<section id="methods">')[1].split("</section>")[0]
     assert methods.count("not available: torchvision is not installed") == 1  # LPIPS says why, once for all
     assert "stability.run is false" in html  # absent stability summary: the page says why
@@ -262,3 +265,18 @@ def test_report_code_names_no_workflow_folder():
         assert not joined.search(text), (path.name, joined.search(text))
         for layout in ("results/", "reports/", "scenes/", "pose_error.json", "index.html"):
             assert layout not in text, (path.name, layout)
+
+
+def test_runs_on_different_machines_are_named_each():
+    from types import SimpleNamespace
+
+    from stages.report.scene_page import _machines_note
+
+    def method(name, cpu):
+        return SimpleNamespace(name=name, run={"machine": {"cpu": cpu, "logical_cores": 2}} if cpu else {})
+
+    sd = SimpleNamespace(methods=[method("livescene", "CPU A"), method("mk-planes", "CPU B"),
+                                  method("conerf", "CPU A"), method("k-planes", None)])
+    assert _machines_note(sd) == (" livescene, conerf trained on CPU A, 2 logical cores. mk-planes trained on CPU B, "
+                                  "2 logical cores.")
+    assert _machines_note(SimpleNamespace(methods=[method("livescene", None)])) == ""  # an older run.json: nothing
