@@ -62,8 +62,16 @@ def ssim(pred: np.ndarray, target: np.ndarray, data_range: float = 1.0) -> float
         # against 8 ms for a 256x192 image); the result moves by ~1e-6 (test_metrics.py)
         return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).permute(2, 0, 1)[None]
 
-    value = structural_similarity_index_measure(nchw(pred), nchw(target), data_range=data_range,
-                                                kernel_size=win, sigma=1.5 * win / 11)
+    # on one torch thread: the convolutions' and the mean's sums are split by the thread count, so with the
+    # process's threads the value moved in the 8th digit between a 1- and a 2-thread evaluation (metrics.json
+    # would then depend on the cores Snakemake gives the job)
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        value = structural_similarity_index_measure(nchw(pred), nchw(target), data_range=data_range,
+                                                    kernel_size=win, sigma=1.5 * win / 11)
+    finally:
+        torch.set_num_threads(previous)
     return float(value)
 
 

@@ -177,3 +177,27 @@ def test_ssim_in_float32_is_within_1e5_of_float64():
                                                        torch.from_numpy(img).permute(2, 0, 1)[None], data_range=1.0))
     assert ssim(render, img) == pytest.approx(double, abs=1e-5)
     assert ssim(render, img) != double  # float32 really ran (else this test checks nothing)
+
+
+def test_ssim_does_not_depend_on_the_thread_count():
+    """An evaluation on 1 and on 2 torch threads (Snakemake hands a job the threads it may use) writes the same
+    SSIM. A smooth image and a noisy copy of it: with the process's threads, seeds 1 and 2 differ in the 7th
+    digit between 1 and 2 threads (a demo render did too); pure noise happens not to."""
+    import cv2
+    import torch
+
+    previous = torch.get_num_threads()
+    try:
+        for seed in (1, 2):
+            rng = np.random.default_rng(seed)
+            base = cv2.GaussianBlur(rng.random((192, 256, 3)).astype(np.float32), (0, 0), 4)
+            base = (base - base.min()) / (base.max() - base.min())
+            pred = np.clip(base + 0.05 * rng.standard_normal(base.shape), 0, 1)
+            values = []
+            for threads in (1, 2, 4):
+                torch.set_num_threads(threads)
+                values.append(ssim(pred, base))
+                assert torch.get_num_threads() == threads  # the caller's setting is put back
+            assert values[0] == values[1] == values[2]
+    finally:
+        torch.set_num_threads(previous)
