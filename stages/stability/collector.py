@@ -9,7 +9,6 @@ reads (docs/stability.md). It imports neither torch nor the checks, so ``--help`
 
 from __future__ import annotations
 
-import platform
 import sys
 import time
 import traceback
@@ -225,7 +224,8 @@ class SummaryCollector:
             "quick": self.quick,
             "counts": {k: counts.get(k, 0) for k in ("pass", "fail", "error", "skip")},
             "seconds": round(self._seconds, 1),
-            "machine": {**machine_info(), "python": platform.python_version(),
-                        "torch": torch.__version__ if torch else None, "cuda": cuda, "threads": self.threads},
+            # torch: None where no check loaded it (machine_info then leaves the key out)
+            "machine": {**machine_info(), "torch": torch.__version__ if torch else None, "cuda": cuda,
+                        "threads": self.threads},
             "cases": [r.to_dict() for r in self.rows],
         }
