@@ -1,4 +1,4 @@
-"""K-Planes interpolation against hand-computed values; initialisation; SH; 1D grid."""
+"""K-Planes interpolation against hand-computed values and grid_sample; initialisation; SH; 1D grid."""
 
 from __future__ import annotations
 
@@ -6,8 +6,17 @@ import math
 
 import pytest
 import torch
+import torch.nn.functional as F
 
-from stages.model.encodings import Grid1DEncoding, KPlanesEncoding, MultiScaleKPlanes, SHEncoding, all_pairs
+from stages.model import encodings
+from stages.model.encodings import (
+    Grid1DEncoding,
+    KPlanesEncoding,
+    MultiScaleKPlanes,
+    SHEncoding,
+    all_pairs,
+    bilinear_rows,
+)
 
 
 def test_single_plane_bilinear_matches_hand_computation():
@@ -70,3 +79,41 @@ def test_grid1d_interpolates_linearly():
         g.values.copy_(torch.tensor([[0.0], [1.0], [4.0], [9.0], [16.0]]))
     out = g(torch.tensor([0.0, 0.125, 0.5, 1.0]))[:, 0]
     assert out.tolist() == pytest.approx([0.0, 0.5, 4.0, 16.0])
+
+
+@pytest.mark.parametrize("shape", [(3, 16, 64, 64), (3, 16, 16, 32), (2, 4, 2, 2), (1, 3, 1, 5), (3, 8, 7, 1)])
+def test_bilinear_rows_is_grid_sample_bit_for_bit(shape):
+    torch.manual_seed(sum(shape))
+    stack = torch.randn(*shape).contiguous(memory_format=torch.channels_last)
+    n = 4099  # not a multiple of any vector width: grid_sample's scalar tail is compared too
+    grid = torch.rand(shape[0], n, 1, 2) * 3 - 1.5  # inside and beyond the border
+    # vertices, cell edges, the border itself and non-finite coordinates
+    special = torch.tensor([-1.0, 1.0, 0.0, -0.5, 0.5, 1.0 - 1e-7, -1.0 + 1e-7, float("inf"), float("-inf"),
+                            float("nan")])
+    grid[:, : special.numel() ** 2, 0, 0] = special.repeat_interleave(special.numel())
+    grid[:, : special.numel() ** 2, 0, 1] = special.repeat(special.numel())
+    expected = F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
+    got = bilinear_rows(stack, grid)
+    assert got.shape == (shape[0], n, shape[1])
+    assert torch.equal(got.permute(0, 2, 1), expected)
+
+
+def test_encodings_sample_rows_without_a_graph_and_grid_sample_with_one(monkeypatch):
+    torch.manual_seed(0)
+    enc = MultiScaleKPlanes([8, 8, 8, 6], channels=4, scales=[1, 2])
+    with torch.no_grad():
+        for g in enc.grids:
+            for stack in g.plane_groups:
+                stack.uniform_(0.5, 1.5)
+    coords = torch.rand(1000, 4) * 2 - 1
+    calls = []
+    real = encodings.bilinear_rows
+    monkeypatch.setattr(encodings, "bilinear_rows", lambda *a: calls.append(1) or real(*a))
+    with_graph = enc(coords)
+    assert not calls and with_graph.requires_grad  # training: grid_sample, whose backward the planes need
+    with torch.no_grad():
+        without = enc(coords)
+    assert len(calls) == 4  # two scales x (spatial, k) plane groups
+    assert torch.equal(without, with_graph.detach())
+    with torch.inference_mode():
+        assert torch.equal(enc.grids[0](coords), enc.grids[0].forward_cn(coords).transpose(0, 1))
