@@ -116,13 +116,16 @@ def test_slurm_dry_run_routes_gpu_rules(tmp_path, monkeypatch):
     assert all(resources(t)["mem_mb"] == "32000" for r, t in run.blocks() if r == "train")
 
 
-def test_default_profile_counts_a_training_and_an_evaluation_as_one_core_each(workflow_copy):
-    """Two of them share 2 cores; the training's torch threads stay config train.threads (the weights depend on it)."""
-    assert profile("default")["set-threads"] == ["train=1", "evaluate=1"]
+def test_default_profile_counts_trainings_and_renders_as_one_core_each(workflow_copy):
+    """Two of them share 2 cores; the training's torch threads stay config train.threads (the weights depend on it),
+    the renders' stay torch's default (renders are bit-identical whatever the count)."""
+    assert profile("default")["set-threads"] == ["train=1", "evaluate=1", "sweep=1", "export=1"]
     blocks = workflow_copy.dry_run().blocks()
-    assert {"train", "evaluate"} <= {rule for rule, _ in blocks}
+    assert {"train", "evaluate", "sweep", "export"} <= {rule for rule, _ in blocks}
     for rule, text in blocks:
-        if rule in ("train", "evaluate"):  # a dry run prints `threads:` only above 1 (the rules ask for 2)
+        if rule in ("train", "evaluate", "sweep", "export"):  # a dry run prints `threads:` only above 1
             assert not re.search(r"^\s*threads: ", text, flags=re.M), (rule, text)
         if rule == "train":
             assert "--set train.threads=2" in text, text
+        if rule == "export":
+            assert "--threads" not in text, text

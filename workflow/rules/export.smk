@@ -26,4 +26,4 @@ rule export:
         ENV
     shell:
         "{params.cli} export --run {params.run} --data {input.data} {params.args} --out {output}"
-        " --device {params.device} --threads {threads} --no-progress > {log} 2>&1"
+        " --device {params.device} --no-progress > {log} 2>&1"
