@@ -27,6 +27,34 @@ from stages.scene import Camera, opengl_to_opencv
 from stages.scene.camera import pixel_directions
 
 
+def canonical_order(mesh: o3d.geometry.TriangleMesh) -> o3d.geometry.TriangleMesh:
+    """The same mesh with its vertices sorted by position (then colour), each triangle turned (winding kept) to
+    start at its smallest vertex, and the triangles sorted.
+
+    Marching cubes on the block grid emits vertices and faces in an order that varies from run to run (its
+    blocks are visited in parallel), so the same fused volume gave other files; in this order it gives the same
+    bytes (docs/export.md, "Reproducible files"). Normals are not carried: compute them afterwards.
+    """
+    positions = np.asarray(mesh.vertices)
+    colors = np.asarray(mesh.vertex_colors)
+    triangles = np.asarray(mesh.triangles)
+    keys = [positions[:, 2], positions[:, 1], positions[:, 0]]
+    if len(colors):
+        keys = [colors[:, 2], colors[:, 1], colors[:, 0], *keys]
+    order = np.lexsort(keys)  # the last key is the primary one: x, then y, z, then colour
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    faces = rank[triangles]
+    turn = (np.arange(3)[None, :] + faces.argmin(axis=1)[:, None]) % 3
+    faces = np.take_along_axis(faces, turn, axis=1)
+    faces = faces[np.lexsort((faces[:, 2], faces[:, 1], faces[:, 0]))]
+    out = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(positions[order]),
+                                    o3d.utility.Vector3iVector(faces.astype(np.int32)))
+    if len(colors):
+        out.vertex_colors = o3d.utility.Vector3dVector(colors[order])
+    return out
+
+
 @dataclass(frozen=True)
 class FusionSettings:
     """Voxel size and the depth filters of the fusion (docs/export.md has the defaults and why)."""
@@ -137,7 +165,8 @@ class TSDFFusion:
             return o3d.geometry.TriangleMesh()
         mesh = mesh.crop(self._crop_box())
         mesh.remove_unreferenced_vertices()
-        mesh.compute_vertex_normals()
+        mesh = canonical_order(mesh)
+        mesh.compute_vertex_normals()  # after the ordering: a vertex normal sums its faces in triangle order
         return mesh
 
     def extract_points(self) -> o3d.geometry.PointCloud:

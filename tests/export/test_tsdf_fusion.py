@@ -3,9 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import open3d as o3d
 
 from stages.export.object_parts import object_pixels
-from stages.export.tsdf_fusion import FusionSettings, TSDFFusion, depth_edges, fusable_depth, ray_distance_to_z
+from stages.export.tsdf_fusion import (
+    FusionSettings,
+    TSDFFusion,
+    canonical_order,
+    depth_edges,
+    fusable_depth,
+    ray_distance_to_z,
+)
 from stages.scene import Camera, generate_rays, look_at
 from stages.scene.camera import pixel_directions
 
@@ -78,3 +86,37 @@ def test_object_pixels_threshold_and_erosion():
     assert mask.sum() == 9 and mask[3:6, 3:6].all()  # the 5x5 square eroded to its 3x3 core
     assert object_pixels(probs, 0, 0.95, erode_px=0).sum() == 0
     assert object_pixels(probs, 1, 0.5).sum() == 0
+
+
+def _face_set(positions: np.ndarray, faces: np.ndarray) -> set:
+    """Each face as its corner positions, turned to start at the smallest corner (winding kept)."""
+    out = set()
+    for f in faces:
+        corners = [tuple(positions[i]) for i in f]
+        k = corners.index(min(corners))
+        out.add(tuple(corners[k:] + corners[:k]))
+    return out
+
+
+def test_canonical_order_gives_the_same_arrays_for_any_vertex_and_face_order():
+    rng = np.random.default_rng(0)
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=12)
+    mesh.vertex_colors = o3d.utility.Vector3dVector(rng.random((len(mesh.vertices), 3)))
+    positions, faces = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    # the same mesh as another run of marching cubes might emit it: vertices permuted, faces turned and shuffled
+    perm = rng.permutation(len(positions))
+    shuffled = o3d.geometry.TriangleMesh()
+    shuffled.vertices = o3d.utility.Vector3dVector(positions[perm])
+    shuffled.vertex_colors = o3d.utility.Vector3dVector(np.asarray(mesh.vertex_colors)[perm])
+    inverse = np.argsort(perm)
+    turned = np.take_along_axis(inverse[faces], (np.arange(3)[None] + rng.integers(0, 3, (len(faces), 1))) % 3, 1)
+    shuffled.triangles = o3d.utility.Vector3iVector(turned[rng.permutation(len(turned))].astype(np.int32))
+    a, b = canonical_order(mesh), canonical_order(shuffled)
+    for name in ("vertices", "triangles", "vertex_colors"):
+        assert np.array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name))), name
+    a.compute_vertex_normals()
+    b.compute_vertex_normals()
+    assert np.array_equal(np.asarray(a.vertex_normals), np.asarray(b.vertex_normals))
+    # the same surface: every face with its corners and winding
+    assert _face_set(np.asarray(a.vertices), np.asarray(a.triangles)) == _face_set(positions, faces)
+    assert np.all(np.diff(np.asarray(a.vertices)[:, 0]) >= 0)
