@@ -52,9 +52,13 @@ def plane_grid(coords: torch.Tensor, pairs: Sequence[tuple[int, int]], detach: b
     return grid
 
 
-def rows_path(coords: torch.Tensor) -> bool:
-    """Whether planes are sampled by ``bilinear_rows``: on a CPU without a graph (rendering, no-grad fields)."""
-    return coords.device.type == "cpu" and not torch.is_grad_enabled()
+def rows_path(coords: torch.Tensor, channels: int) -> bool:
+    """Whether planes are sampled by ``bilinear_rows``: on a CPU without a graph (rendering, no-grad fields).
+
+    Not for one-channel planes: embedding_bag's kernel for a one-column table rounds differently from
+    grid_sample (every width from 2 to 128 gives grid_sample's bits; tested).
+    """
+    return coords.device.type == "cpu" and channels > 1 and not torch.is_grad_enabled()
 
 
 def bilinear_rows(stack: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
@@ -66,7 +70,7 @@ def bilinear_rows(stack: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
     weights: one ``embedding_bag``. With the index arithmetic, 1.3x faster than
     grid_sample in a demo render, 1.8x for scattered samples (docs/model.md,
     "Rendering on a CPU"). The arithmetic is grid_sample's (unnormalisation, border
-    clip, weights, sum order), so the values are the same bits (tested).
+    clip, weights, sum order), so the values are the same bits for C >= 2 (tested).
     """
     n_planes, channels, height, width = stack.shape
     rows = stack.permute(0, 2, 3, 1).reshape(-1, channels)  # a view for channels-last planes
@@ -192,7 +196,7 @@ class KPlanesEncoding(nn.Module):
 
     def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
-        if rows_path(coords):
+        if rows_path(coords, self.channels):
             return self.forward_nc(coords, cache)
         return self.forward_cn(coords, cache).transpose(0, 1)
 
@@ -216,7 +220,7 @@ class MultiScaleKPlanes(nn.Module):
     def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         # every scale samples the same pairs at the same points: one grid per pair group serves them all
         cache = {} if cache is None else cache
-        if rows_path(coords):
+        if rows_path(coords, self.grids[0].channels):
             return torch.cat([g.forward_nc(coords, cache) for g in self.grids], dim=1)
         return torch.cat([g.forward_cn(coords, cache) for g in self.grids], dim=0).transpose(0, 1)
 

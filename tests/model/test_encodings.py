@@ -81,7 +81,8 @@ def test_grid1d_interpolates_linearly():
     assert out.tolist() == pytest.approx([0.0, 0.5, 4.0, 16.0])
 
 
-@pytest.mark.parametrize("shape", [(3, 16, 64, 64), (3, 16, 16, 32), (2, 4, 2, 2), (1, 3, 1, 5), (3, 8, 7, 1)])
+@pytest.mark.parametrize("shape", [(3, 16, 64, 64), (3, 16, 16, 32), (2, 4, 2, 2), (1, 3, 1, 5), (3, 8, 7, 1),
+                                   (2, 2, 33, 17), (1, 37, 9, 9), (1, 128, 5, 6)])
 def test_bilinear_rows_is_grid_sample_bit_for_bit(shape):
     torch.manual_seed(sum(shape))
     stack = torch.randn(*shape).contiguous(memory_format=torch.channels_last)
@@ -117,3 +118,19 @@ def test_encodings_sample_rows_without_a_graph_and_grid_sample_with_one(monkeypa
     assert torch.equal(without, with_graph.detach())
     with torch.inference_mode():
         assert torch.equal(enc.grids[0](coords), enc.grids[0].forward_cn(coords).transpose(0, 1))
+    # one-channel planes stay with grid_sample (embedding_bag rounds a one-column table differently)
+    narrow = KPlanesEncoding([8, 8, 8], channels=1, spatial_dims=3)
+    calls.clear()
+    with torch.no_grad():
+        assert torch.equal(narrow(coords[:, :3]), narrow.forward_cn(coords[:, :3]).transpose(0, 1))
+    assert not calls
+
+
+def test_bilinear_rows_indexes_planes_of_more_than_2_24_vertices():
+    # vertex numbers from 2**24 on are not exact in float32: the int64 index path, against grid_sample
+    side = 4100  # 4100**2 > 2**24
+    stack = torch.rand(1, 2, side, side).contiguous(memory_format=torch.channels_last)
+    # odd vertex numbers above 2**24 (x0 = 4097, y0 = 4098) round to a neighbour in float32
+    grid = torch.tensor([[0.9992, 0.9999], [0.9982, 0.9996], [1.0, 1.0], [-1.0, 1.0], [0.3, -0.7]]).view(1, 5, 1, 2)
+    expected = F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
+    assert torch.equal(bilinear_rows(stack, grid).permute(0, 2, 1), expected)
