@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -172,27 +172,26 @@ class KPlanesEncoding(nn.Module):
     def out_dim(self) -> int:
         return self.channels
 
-    def forward_cn(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
-        """``coords`` [N, n_dims] in [-1, 1] -> features [C, N] (grid_sample's layout)."""
+    def _product(self, coords: torch.Tensor, cache: PlaneGrids | None,
+                 sample: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]) -> torch.Tensor:
+        """The product over every plane of ``sample(stack, grid)``'s per-plane features, in its layout."""
         out: torch.Tensor | None = None
         for g, stack in enumerate(self.plane_groups):
             grid = plane_grid(coords, self.group_pairs(g), self.group_is_spatial(g), cache).to(stack.dtype)
-            f = F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
+            f = sample(stack, grid)
             for j in range(f.shape[0]):  # products by hand: prod()'s backward looks for zeros (a host sync)
                 out = f[j] if out is None else out * f[j]
         assert out is not None
         return out
 
+    def forward_cn(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
+        """``coords`` [N, n_dims] in [-1, 1] -> features [C, N] (grid_sample's layout)."""
+        return self._product(coords, cache, lambda stack, grid: F.grid_sample(
+            stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0])
+
     def forward_nc(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, n_dims] in [-1, 1] -> features [N, C], sampled as bags of vertex rows (no gradient)."""
-        out: torch.Tensor | None = None
-        for g, stack in enumerate(self.plane_groups):
-            grid = plane_grid(coords, self.group_pairs(g), self.group_is_spatial(g), cache).to(stack.dtype)
-            f = bilinear_rows(stack, grid)
-            for j in range(f.shape[0]):
-                out = f[j] if out is None else out * f[j]
-        assert out is not None
-        return out
+        return self._product(coords, cache, bilinear_rows)
 
     def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""
