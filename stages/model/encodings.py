@@ -25,10 +25,11 @@ def all_pairs(n_dims: int) -> list[tuple[int, int]]:
     return list(itertools.combinations(range(n_dims), 2))
 
 
-PlaneGrids = dict[tuple[tuple[int, int], ...], torch.Tensor]
-"""Sampling grids [G, N, 1, 2] by the axis pairs they hold: built once per batch of points and shared by
-every field and scale that samples planes of the same pairs (the spatial xy, xz, yz grid of one level
-serves the probability tri-plane, every scale of the radiance field and the proposal field)."""
+PlaneGrids = dict[tuple, torch.Tensor]
+"""What sampling one batch of points needs, built once and shared by every field and scale that reads it:
+grids [G, N, 1, 2] by the axis pairs they hold (the spatial xy, xz, yz grid of one level serves the
+probability tri-plane, every scale of the radiance field and the proposal field), and, without a graph on a
+CPU, ``axis_cells`` by ``("cells", axis, vertices)``."""
 
 
 def plane_grid(coords: torch.Tensor, pairs: Sequence[tuple[int, int]], detach: bool,
@@ -61,6 +62,52 @@ def rows_path(coords: torch.Tensor, channels: int) -> bool:
     return coords.device.type == "cpu" and channels > 1 and not torch.is_grad_enabled()
 
 
+def axis_cells(values: torch.Tensor, size: int) -> torch.Tensor:
+    """Coordinates in [-1, 1] along an axis of ``size`` vertices -> [3, *values.shape]: the cell's first vertex
+    (a float), the weight of the vertex after it and the weight of the first one.
+
+    grid_sample's arithmetic (align_corners, border clip; a NaN goes to the first vertex), so that a plane
+    sampled from these cells gives its bits. Every plane of a level that reads the same axis at the same
+    resolution shares one set (``KPlanesEncoding.forward_nc``).
+    """
+    x = ((values + 1) * ((size - 1) / 2)).nan_to_num_(0.0).clamp_(0, size - 1)
+    cells = torch.empty(3, *values.shape, dtype=values.dtype, device=values.device)
+    # a sample on the last vertex takes the cell before it with weight 1 on its far vertex: the same value
+    torch.floor(x, out=cells[0]).clamp_(max=size - 1 - min(1, size - 1))
+    torch.sub(x, cells[0], out=cells[1])
+    torch.sub(1, cells[1], out=cells[2])  # grid_sample's (x0 + 1) - x, bit for bit
+    return cells
+
+
+def rows_from_cells(stack: torch.Tensor, cells: Sequence[tuple[torch.Tensor, torch.Tensor]]) -> torch.Tensor:
+    """Plane ``g`` of ``stack`` [G, C, H, W] sampled at the cells ``(along W, along H)`` of ``cells[g]`` -> [G, N, C].
+
+    A bag of four channels-last vertex rows per sample, weighted by its bilinear weights: one ``embedding_bag``.
+    """
+    n_planes, channels, height, width = stack.shape
+    rows = stack.permute(0, 2, 3, 1).reshape(-1, channels)  # a view for channels-last planes
+    n = cells[0][0].shape[-1]
+    dx, dy = min(1, width - 1), min(1, height - 1)
+    # vertex numbers are exact in float32 below 2**24, and int32 indices halve the index traffic
+    exact = rows.shape[0] < 2**24
+    kind = torch.int32 if exact else torch.int64
+    weights = torch.empty(n_planes, n, 4, dtype=stack.dtype, device=stack.device)
+    first = torch.empty(n_planes, n, dtype=cells[0][0].dtype if exact else kind, device=stack.device)
+    for g, (u, v) in enumerate(cells):
+        # each product written into its slot of the sample's four (stack() and broadcast products are 2-6x slower)
+        for slot, (a, b) in enumerate(((v[2], u[2]), (v[2], u[1]), (v[1], u[2]), (v[1], u[1]))):
+            torch.mul(a, b, out=weights[g, :, slot])
+        offset = g * height * width
+        if exact:
+            torch.mul(v[0], width, out=first[g]).add_(u[0]).add_(offset)
+        else:
+            torch.mul(v[0].to(kind), width, out=first[g]).add_(u[0].to(kind)).add_(offset)
+    corners = torch.tensor([0, dx, dy * width, dy * width + dx], device=stack.device, dtype=kind)
+    index = (first.to(kind).unsqueeze(-1) + corners).view(-1, 4)
+    out = F.embedding_bag(index, rows, per_sample_weights=weights.view(-1, 4), mode="sum")
+    return out.view(n_planes, n, channels)
+
+
 def bilinear_rows(stack: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
     """``grid_sample(stack, grid, bilinear, border, align_corners=True)`` as [G, N, C], for use without a gradient.
 
@@ -72,33 +119,9 @@ def bilinear_rows(stack: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
     "Rendering on a CPU"). The arithmetic is grid_sample's (unnormalisation, border
     clip, weights, sum order), so the values are the same bits for C >= 2 (tested).
     """
-    n_planes, channels, height, width = stack.shape
-    rows = stack.permute(0, 2, 3, 1).reshape(-1, channels)  # a view for channels-last planes
-    # grid_sample's unnormalisation and border clip, which sends a NaN coordinate to the first vertex
-    x = ((grid[:, :, 0, 0] + 1) * ((width - 1) / 2)).nan_to_num_(0.0).clamp_(0, width - 1)
-    y = ((grid[:, :, 0, 1] + 1) * ((height - 1) / 2)).nan_to_num_(0.0).clamp_(0, height - 1)
-    # a sample on the last vertex takes the cell before it with weight 1 on its far corner: the same value
-    dx, dy = min(1, width - 1), min(1, height - 1)
-    x0 = x.floor().clamp_(max=width - 1 - dx)
-    y0 = y.floor().clamp_(max=height - 1 - dy)
-    east, south = x.sub_(x0), y.sub_(y0)
-    west, north = 1 - east, 1 - south  # grid_sample's (x0 + 1) - x, bit for bit
-    # each product written into its slot of the sample's four (stack() and broadcast products are 2-6x slower)
-    weights = torch.empty(*east.shape, 4, dtype=east.dtype, device=east.device)
-    for slot, (a, b) in enumerate(((north, west), (north, east), (south, west), (south, east))):
-        torch.mul(a, b, out=weights[..., slot])
-    # vertex numbers are exact in float32 below 2**24, and int32 indices halve the index traffic
-    exact = rows.shape[0] < 2**24
-    kind = torch.int32 if exact else torch.int64
-    offsets = torch.arange(n_planes, device=stack.device, dtype=x0.dtype if exact else kind) * (height * width)
-    if exact:
-        first = y0.mul_(width).add_(x0).add_(offsets.view(-1, 1)).to(kind)
-    else:
-        first = y0.to(kind) * width + x0.to(kind) + offsets.view(-1, 1)
-    corners = torch.tensor([0, dx, dy * width, dy * width + dx], device=stack.device, dtype=kind)
-    index = (first.unsqueeze(-1) + corners).view(-1, 4)
-    out = F.embedding_bag(index, rows, per_sample_weights=weights.view(-1, 4), mode="sum")
-    return out.view(n_planes, -1, channels)
+    _, _, height, width = stack.shape
+    along_w, along_h = axis_cells(grid[:, :, 0, 0], width), axis_cells(grid[:, :, 0, 1], height)
+    return rows_from_cells(stack, [(along_w[:, g], along_h[:, g]) for g in range(stack.shape[0])])
 
 
 class KPlanesEncoding(nn.Module):
@@ -172,26 +195,50 @@ class KPlanesEncoding(nn.Module):
     def out_dim(self) -> int:
         return self.channels
 
-    def _product(self, coords: torch.Tensor, cache: PlaneGrids | None,
-                 sample: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]) -> torch.Tensor:
-        """The product over every plane of ``sample(stack, grid)``'s per-plane features, in its layout."""
+    def _product(self, sample: Callable[[int, torch.Tensor], torch.Tensor], in_place: bool) -> torch.Tensor:
+        """The product over every plane of ``sample(g, stack)``'s per-plane features of group ``g``, in its layout."""
         out: torch.Tensor | None = None
         for g, stack in enumerate(self.plane_groups):
-            grid = plane_grid(coords, self.group_pairs(g), self.group_is_spatial(g), cache).to(stack.dtype)
-            f = sample(stack, grid)
+            f = sample(g, stack)
             for j in range(f.shape[0]):  # products by hand: prod()'s backward looks for zeros (a host sync)
-                out = f[j] if out is None else out * f[j]
+                if out is None:
+                    out = f[j]
+                elif in_place:
+                    out.mul_(f[j])
+                else:
+                    out = out * f[j]
         assert out is not None
         return out
 
     def forward_cn(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, n_dims] in [-1, 1] -> features [C, N] (grid_sample's layout)."""
-        return self._product(coords, cache, lambda stack, grid: F.grid_sample(
-            stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0])
+        def sample(g: int, stack: torch.Tensor) -> torch.Tensor:
+            grid = plane_grid(coords, self.group_pairs(g), self.group_is_spatial(g), cache).to(stack.dtype)
+            return F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
+
+        return self._product(sample, in_place=False)
 
     def forward_nc(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
-        """``coords`` [N, n_dims] in [-1, 1] -> features [N, C], sampled as bags of vertex rows (no gradient)."""
-        return self._product(coords, cache, bilinear_rows)
+        """``coords`` [N, n_dims] in [-1, 1] -> features [N, C], sampled as bags of vertex rows (no gradient).
+
+        Each axis is cut into cells once per resolution (``axis_cells``) for every plane, field and scale that
+        reads it at that resolution: a level's probability tri-plane and first radiance scale share theirs.
+        """
+        cache = {} if cache is None else cache
+
+        def cells(axis: int, size: int, dtype: torch.dtype) -> torch.Tensor:
+            key = ("cells", axis, size)
+            if key not in cache:
+                cache[key] = axis_cells(coords[:, axis].to(dtype), size)
+            return cache[key]
+
+        def sample(g: int, stack: torch.Tensor) -> torch.Tensor:
+            height, width = stack.shape[-2:]
+            return rows_from_cells(stack, [(cells(a, width, stack.dtype), cells(b, height, stack.dtype))
+                                           for a, b in self.group_pairs(g)])
+
+        # the products are new arrays (no graph to keep): multiplied in place
+        return self._product(sample, in_place=True)
 
     def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, n_dims] in [-1, 1] -> features [N, C]."""

@@ -108,8 +108,8 @@ def test_encodings_sample_rows_without_a_graph_and_grid_sample_with_one(monkeypa
                 stack.uniform_(0.5, 1.5)
     coords = torch.rand(1000, 4) * 2 - 1
     calls = []
-    real = encodings.bilinear_rows
-    monkeypatch.setattr(encodings, "bilinear_rows", lambda *a: calls.append(1) or real(*a))
+    real = encodings.rows_from_cells
+    monkeypatch.setattr(encodings, "rows_from_cells", lambda *a: calls.append(1) or real(*a))
     with_graph = enc(coords)
     assert not calls and with_graph.requires_grad  # training: grid_sample, whose backward the planes need
     with torch.no_grad():
