@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+import torch.nn.functional as F
 
 from stages.model import losses as L
 from stages.model.encodings import KPlanesEncoding, MultiScaleKPlanes
@@ -173,9 +174,21 @@ def test_k_regularisers_of_a_field_without_k_planes_follow_its_dtype():
 def test_plane_tv_gradient_written_by_hand_matches_autograd():
     from stages.model.losses import _NeighbourSquares
 
-    x = torch.rand(3, 2, 5, 7, dtype=torch.float64).contiguous(memory_format=torch.channels_last).requires_grad_(True)
+    for shape in ((3, 2, 5, 7), (2, 3, 2, 2)):  # two vertices: one difference, no interior vertex
+        x = torch.rand(*shape, dtype=torch.float64).contiguous(memory_format=torch.channels_last).requires_grad_(True)
+        for dim in (2, 3):
+            assert torch.autograd.gradcheck(lambda t, d=dim: _NeighbourSquares.apply(t, d), (x,))
+            n = x.shape[dim] - 1
+            plain = (x.narrow(dim, 1, n) - x.narrow(dim, 0, n)).square().mean(dim=(1, 2, 3))
+            torch.testing.assert_close(_NeighbourSquares.apply(x, dim), plain)
+            # the gradient comes in the planes' channels-last layout (accumulated into theirs without a copy)
+            (grad,) = torch.autograd.grad(_NeighbourSquares.apply(x, dim).sum(), x)
+            assert grad.is_contiguous(memory_format=torch.channels_last)
+    # bit for bit the padded diff's gradient, the signs of zeros too (equal neighbours give zero differences)
+    x = torch.rand(2, 3, 6, 6).round().contiguous(memory_format=torch.channels_last).requires_grad_(True)
     for dim in (2, 3):
-        assert torch.autograd.gradcheck(lambda t, d=dim: _NeighbourSquares.apply(t, d), (x,))
-        n = x.shape[dim] - 1
-        plain = (x.narrow(dim, 1, n) - x.narrow(dim, 0, n)).square().mean(dim=(1, 2, 3))
-        torch.testing.assert_close(_NeighbourSquares.apply(x, dim), plain)
+        d = torch.diff(x.detach(), dim=dim)
+        gd = d * (torch.ones(2).view(-1, 1, 1, 1) * (2.0 / d[0].numel()))
+        expected = -torch.diff(F.pad(gd, (1, 1) if dim == 3 else (0, 0, 1, 1)), dim=dim)
+        (grad,) = torch.autograd.grad(_NeighbourSquares.apply(x, dim).sum(), x)
+        assert torch.equal(grad.contiguous().view(torch.int32), expected.contiguous().view(torch.int32))
