@@ -27,6 +27,9 @@ rule train:
         # weights) depend on the thread count
         torch_threads=config["train"]["threads"],
     threads: config["train"]["threads"]
+    # a free core goes to a waiting training before an evaluation or export: every method's evaluation waits for
+    # its training, so the last training finishing early shortens the job (docs/workflow.md, "Machines")
+    priority: 1
     resources:
         mem_mb=8000,
         # minutes: a cpu-demo step takes ~0.1 s on 2 cores; a time budget caps it
