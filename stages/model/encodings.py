@@ -97,11 +97,12 @@ def rows_from_cells(stack: torch.Tensor, cells: Sequence[tuple[torch.Tensor, tor
         # each product written into its slot of the sample's four (stack() and broadcast products are 2-6x slower)
         for slot, (a, b) in enumerate(((v[2], u[2]), (v[2], u[1]), (v[1], u[2]), (v[1], u[1]))):
             torch.mul(a, b, out=weights[g, :, slot])
-        offset = g * height * width
-        if exact:
-            torch.mul(v[0], width, out=first[g]).add_(u[0]).add_(offset)
+        if exact:  # whole numbers below 2**24: every sum is exact
+            torch.add(u[0], v[0], alpha=width, out=first[g])
         else:
-            torch.mul(v[0].to(kind), width, out=first[g]).add_(u[0].to(kind)).add_(offset)
+            torch.add(u[0].to(kind), v[0].to(kind), alpha=width, out=first[g])
+        if g:
+            first[g].add_(g * height * width)
     corners = torch.tensor([0, dx, dy * width, dy * width + dx], device=stack.device, dtype=kind)
     index = (first.to(kind).unsqueeze(-1) + corners).view(-1, 4)
     out = F.embedding_bag(index, rows, per_sample_weights=weights.view(-1, 4), mode="sum")
