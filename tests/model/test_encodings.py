@@ -126,6 +126,28 @@ def test_encodings_sample_rows_without_a_graph_and_grid_sample_with_one(monkeypa
     assert not calls
 
 
+def test_fields_sharing_a_cache_cut_each_axis_once_with_the_same_bits(monkeypatch):
+    # a level's tri-plane and radiance scales read x, y, z (and k) at shared resolutions: one set of cells each
+    torch.manual_seed(1)
+    radiance = MultiScaleKPlanes([8, 8, 8, 6], channels=4, scales=[1, 2])
+    triplane = KPlanesEncoding([8, 8, 8], channels=3, spatial_dims=3)
+    with torch.no_grad():
+        for g in [*radiance.grids, triplane]:
+            for stack in g.plane_groups:
+                stack.uniform_(0.5, 1.5)
+    coords = torch.rand(777, 4) * 2.2 - 1.1
+    cuts = []
+    real = encodings.axis_cells
+    monkeypatch.setattr(encodings, "axis_cells", lambda values, size: cuts.append(size) or real(values, size))
+    cache: dict = {}
+    with torch.no_grad():
+        shared = (triplane(coords[:, :3], cache), radiance(coords, cache))
+    assert sorted(cuts) == [6, 8, 8, 8, 16, 16, 16]  # x, y, z at 8 and 16 vertices, k at 6: once each
+    assert torch.equal(shared[0], triplane.forward_cn(coords[:, :3]).transpose(0, 1))
+    expected = torch.cat([g.forward_cn(coords) for g in radiance.grids], dim=0).transpose(0, 1)
+    assert torch.equal(shared[1], expected)
+
+
 def test_bilinear_rows_indexes_planes_of_more_than_2_24_vertices():
     # vertex numbers from 2**24 on are not exact in float32: the int64 index path, against grid_sample
     side = 4100  # 4100**2 > 2**24
