@@ -54,7 +54,8 @@ def plane_grid(coords: torch.Tensor, pairs: Sequence[tuple[int, int]], detach: b
 
 
 def rows_path(coords: torch.Tensor, channels: int) -> bool:
-    """Whether planes are sampled by ``bilinear_rows``: on a CPU without a graph (rendering, no-grad fields).
+    """Whether planes are sampled as bags of rows (``rows_from_cells``): on a CPU without a graph (rendering,
+    no-grad fields).
 
     Not for one-channel planes: embedding_bag's kernel for a one-column table rounds differently from
     grid_sample (widths 2-40, 48, 64, 96 and 128 all gave grid_sample's bits; the tests keep seven of them).
@@ -80,9 +81,14 @@ def axis_cells(values: torch.Tensor, size: int) -> torch.Tensor:
 
 
 def rows_from_cells(stack: torch.Tensor, cells: Sequence[tuple[torch.Tensor, torch.Tensor]]) -> torch.Tensor:
-    """Plane ``g`` of ``stack`` [G, C, H, W] sampled at the cells ``(along W, along H)`` of ``cells[g]`` -> [G, N, C].
+    """Plane ``g`` of ``stack`` [G, C, H, W] sampled at the cells ``(along W, along H)`` of ``cells[g]`` -> [G, N, C],
+    for use without a gradient.
 
-    A bag of four channels-last vertex rows per sample, weighted by its bilinear weights: one ``embedding_bag``.
+    grid_sample's CPU kernel loops over the channels and gathers one float per vertex and channel. Planes stored
+    channels last hold a vertex's C features in one contiguous row, so a sample is a bag of four rows weighted
+    by its bilinear weights: one ``embedding_bag`` (docs/model.md, "Rendering on a CPU"). With ``axis_cells``
+    the arithmetic is grid_sample's (unnormalisation, border clip, weights, sum order), so the values are the
+    same bits for C >= 2 (tested).
     """
     n_planes, channels, height, width = stack.shape
     rows = stack.permute(0, 2, 3, 1).reshape(-1, channels)  # a view for channels-last planes
@@ -112,22 +118,6 @@ def rows_from_cells(stack: torch.Tensor, cells: Sequence[tuple[torch.Tensor, tor
     return out.view(n_planes, n, channels)
 
 
-def bilinear_rows(stack: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
-    """``grid_sample(stack, grid, bilinear, border, align_corners=True)`` as [G, N, C], for use without a gradient.
-
-    grid_sample's CPU kernel loops over the channels and gathers one float per
-    vertex and channel. Planes stored channels last hold a vertex's C features in
-    one contiguous row, so a sample is a bag of four rows weighted by its bilinear
-    weights: one ``embedding_bag``. With the index arithmetic, 1.3x faster than
-    grid_sample in a demo render, 1.8x for scattered samples (docs/model.md,
-    "Rendering on a CPU"). The arithmetic is grid_sample's (unnormalisation, border
-    clip, weights, sum order), so the values are the same bits for C >= 2 (tested).
-    """
-    _, _, height, width = stack.shape
-    along_w, along_h = axis_cells(grid[:, :, 0, 0], width), axis_cells(grid[:, :, 0, 1], height)
-    return rows_from_cells(stack, [(along_w[:, g], along_h[:, g]) for g in range(stack.shape[0])])
-
-
 class KPlanesEncoding(nn.Module):
     """One scale of K-Planes: planes over ``pairs`` of an N-D coordinate, combined by product.
 
@@ -135,7 +125,7 @@ class KPlanesEncoding(nn.Module):
     are stored stacked in one parameter ``[G, C, H, W]`` and sampled by one
     ``grid_sample`` call: LiveScene's six planes per scale take two calls, not six.
     On a CPU without a graph (rendering, the no-grad fields of a step) one
-    ``bilinear_rows`` call samples them instead, with the same values.
+    ``rows_from_cells`` call samples them instead, with the same values.
 
     Args:
         resolution: vertices per axis, one entry per input dimension.

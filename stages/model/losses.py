@@ -94,14 +94,13 @@ class _NeighbourSquares(torch.autograd.Function):
     def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:  # type: ignore[override]
         (d,) = ctx.saved_tensors
         gd = d * (grad.view(-1, 1, 1, 1) * (2.0 / ctx.n))
-        # vertex k gets gd[k - 1] - gd[k] (zero beyond either end), written in place instead of a padded copy's diff
+        # vertex k gets -(gd[k] - gd[k - 1]) (gd zero beyond either end): a padded copy's diff written in place, with
+        # its arithmetic, so the same bits, zeros' signs included (gd[k - 1] - gd[k] flips them, and that changed a
+        # CoNeRF-style run after 60 steps); in the planes' layout, so it adds into their gradient without a copy
         dim, m = ctx.dim, gd.shape[ctx.dim]  # m differences between m + 1 vertices
         shape = (*gd.shape[:dim], m + 1, *gd.shape[dim + 1 :])
         layout = torch.channels_last if gd.is_contiguous(memory_format=torch.channels_last) else torch.contiguous_format
-        # the planes' layout: the gradient adds into theirs without a copy
         out = torch.empty(shape, dtype=gd.dtype, device=gd.device, memory_format=layout)
-        # the padded diff's very arithmetic, -(gd[k] - gd[k - 1]): the same bits, zeros' signs included (a sign
-        # flip of a zero gradient changed a CoNeRF-style run after 60 steps)
         out.narrow(dim, 0, 1).copy_(gd.narrow(dim, 0, 1))
         torch.sub(gd.narrow(dim, 1, m - 1), gd.narrow(dim, 0, m - 1), out=out.narrow(dim, 1, m - 1))
         torch.sub(0.0, gd.narrow(dim, m - 1, 1), out=out.narrow(dim, m, 1))

@@ -15,8 +15,16 @@ from stages.model.encodings import (
     MultiScaleKPlanes,
     SHEncoding,
     all_pairs,
-    bilinear_rows,
+    axis_cells,
+    rows_from_cells,
 )
+
+
+def bilinear_rows(stack: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+    """grid_sample's call (bilinear, border, align_corners) on [G, N, 1, 2] grids, as bags of rows: [G, N, C]."""
+    _, _, height, width = stack.shape
+    along_w, along_h = axis_cells(grid[:, :, 0, 0], width), axis_cells(grid[:, :, 0, 1], height)
+    return rows_from_cells(stack, [(along_w[:, g], along_h[:, g]) for g in range(stack.shape[0])])
 
 
 def test_single_plane_bilinear_matches_hand_computation():

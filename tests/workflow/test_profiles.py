@@ -118,7 +118,7 @@ def test_slurm_dry_run_routes_gpu_rules(tmp_path, monkeypatch):
 
 def test_default_profile_counts_trainings_and_renders_as_one_core_each(workflow_copy):
     """Two of them share 2 cores; the training's torch threads stay config train.threads (the weights depend on it),
-    the renders' stay torch's default (renders are bit-identical whatever the count)."""
+    the renders run on the one thread Snakemake gives them (renders are bit-identical whatever the count)."""
     assert profile("default")["set-threads"] == ["train=1", "evaluate=1", "sweep=1", "export=1"]
     blocks = workflow_copy.dry_run().blocks()
     assert {"train", "evaluate", "sweep", "export"} <= {rule for rule, _ in blocks}
