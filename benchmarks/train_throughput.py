@@ -154,8 +154,11 @@ def measure_one(args: argparse.Namespace) -> dict:
             with count_torch_ops() as ops:
                 step()
     step_s = sorted(times)[len(times) // 2]
+    reserved = None
     if cuda:
         peak, kind = torch.cuda.max_memory_allocated(device) / 2**20, "cuda max_memory_allocated"
+        # what the caching allocator holds, CUDA graphs' private pools included (their replays allocate nothing)
+        reserved = round(torch.cuda.max_memory_reserved(device) / 2**20, 1)
     else:
         peak, kind = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "process max RSS"
     return {
@@ -164,7 +167,8 @@ def measure_one(args: argparse.Namespace) -> dict:
         "step_ms": round(step_s * 1000, 1), "rays_per_s": round(cfg.train.batch_rays / step_s),
         "ops": None if ops is None else int(sum(ops.values())), "syncs": int(sum(syncs.values())),
         "sync_calls": dict(syncs),
-        "peak_mib": round(peak, 1), "peak_kind": kind, "machine": machine_line(machine_info(str(device))),
+        "peak_mib": round(peak, 1), "peak_kind": kind, "reserved_mib": reserved,
+        "machine": machine_line(machine_info(str(device))),
     }
 
 

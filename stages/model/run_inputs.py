@@ -20,7 +20,7 @@ EXECUTION_ONLY: dict[str, frozenset[str] | None] = {
     # None: the whole section; a set: those keys of it
     "train": frozenset({"max_steps", "max_seconds", "eval_every", "eval_rays", "checkpoint_every",
                         "keep_checkpoints", "log_every", "max_nonfinite", "render_chunk", "threads", "compile",
-                        "compile_mode"}),
+                        "compile_mode", "cuda_graphs"}),
     "trust": None,
     "data": None,
     "language_targets": None,

@@ -41,9 +41,10 @@ from .appearance_choice import EXPOSURE_FILE, resolve_appearance
 from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
-from .ray_dataset import RayDataset, frame_times, state_vector
+from .ray_dataset import RayBatch, RayDataset, frame_times, state_vector
 from .run_inputs import config_differences, data_digest
 from .scene_normalization import SceneNormalization
+from .step_graphs import StepGraphs
 
 MODEL_FORMAT = 2
 """2: K-Planes planes stored stacked per shape (``plane_groups.N``, was ``planes.N``)."""
@@ -233,6 +234,15 @@ class Trainer:
         # CUDA graph replays overwrite their last outputs: each step starts a new generation of them
         self._graph_steps = cfg.train.compile and cfg.train.compile_mode == "reduce-overhead" \
             and self.device.type == "cuda"
+        self.step_graphs = None
+        if cfg.train.cuda_graphs and self.device.type == "cuda":
+            if cfg.train.compile:
+                raise InputError("train.cuda_graphs", "cannot capture a step whose fields torch.compile compiles",
+                                 "set train.compile=false (the whole step's graph replaces the fields' ones)")
+            if self.amp_dtype == torch.float16:
+                raise InputError("train.cuda_graphs", "fp16's loss scaler decides on the host at every step",
+                                 "use train.mixed_precision=bf16 or off with CUDA graphs")
+            self.step_graphs = StepGraphs(self)
         if self.language is not None:
             self.language = self.language.to(self.device)
         self._named_params = [(n, p) for n, p in self.model.named_parameters() if p.requires_grad]
@@ -370,27 +380,24 @@ class Trainer:
                 self.log_rows = [r for r in csv.DictReader(fh) if int(float(r["step"])) <= self.step]
 
     # -- one step -------------------------------------------------------------------------------------------
-    def _autocast(self) -> Any:
+    def _autocast(self, cache_casts: bool = True) -> Any:
         if self.amp_dtype is None:
             return torch.autocast(device_type=self.device.type, enabled=False)
-        return torch.autocast(device_type=self.device.type, dtype=self.amp_dtype)
+        # a CUDA graph must not keep the casts of weights cached at capture (torch's CUDA graph notes)
+        return torch.autocast(device_type=self.device.type, dtype=self.amp_dtype, cache_enabled=cache_casts)
 
-    def train_step(self) -> PendingStep:
-        """One optimisation step, queued without waiting for the device.
+    def step_body(self, batch: RayBatch, step: int, anneal: float | torch.Tensor | None = None,
+                  cache_casts: bool = True) -> tuple[list[str], torch.Tensor, torch.Tensor, list[str], torch.Tensor]:
+        """Forward, loss terms, backward, finite checks and Adam's update, all queued on the device.
 
-        Finite checks of every loss term and every gradient run on the device;
-        a step with a non-finite one is skipped there (fused Adam's ``found_inf``
-        leaves weights, moments and step count as they were). Nothing is read
-        back to the host: ``flush_steps`` reads every queued step at once, names
-        the skipped ones and keeps the streak (docs/model.md).
+        Returns the term names, every weighted term and their sum, the terms' finite flags, the names of the
+        parameters with a gradient and those gradients' finite flags. A step with a non-finite term or gradient
+        is skipped on the device (fused Adam's ``found_inf`` leaves weights, moments and step count as they
+        were). Eager steps and CUDA graph captures (step_graphs.py) run this same code.
         """
-        self.model.train()
-        if self._graph_steps:
-            torch.compiler.cudagraph_mark_step_begin()
-        batch = self.train_rays.sample(self.config.train.batch_rays, self.ray_generator)
-        with self._autocast():
-            out = self.model(batch.rays, step=self.step, generator=self.jitter_generator)
-            terms = self.model.loss_dict(out, batch, self.step, self.language)
+        with self._autocast(cache_casts):
+            out = self.model(batch.rays, step=step, generator=self.jitter_generator, anneal=anneal)
+            terms = self.model.loss_dict(out, batch, step, self.language)
         names = list(terms)
         values = torch.stack([terms[n].float() for n in names])
         terms_ok = torch.isfinite(values)
@@ -407,14 +414,41 @@ class Trainer:
         bad = ~(terms_ok.all() & grads_ok.all())
         self.optimizer.found_inf = bad.float()
         self.optimizer.step()
-        if self.scaler is not None:
-            self.scaler.update()  # lowers the loss scale after an overflow (recorded by unscale_)
+        return names, torch.cat([values.detach(), loss.detach()[None]]), terms_ok, [n for n, _ in with_grad], grads_ok
+
+    def train_step(self) -> PendingStep:
+        """One optimisation step, queued without waiting for the device.
+
+        Nothing is read back to the host: ``flush_steps`` reads every queued
+        step at once, names the skipped ones and keeps the streak (docs/model.md).
+        With ``train.cuda_graphs`` on CUDA the step is a graph replay after a few eager steps.
+        """
+        self.model.train()
+        if self._graph_steps:
+            torch.compiler.cudagraph_mark_step_begin()
+        if self.step_graphs is not None and self.step_graphs.ready():
+            indices = torch.randint(0, self.train_rays.n_rays, (self.config.train.batch_rays,),
+                                    generator=self.ray_generator)  # the rays ``RayDataset.sample`` draws
+            names, values, terms_ok, grad_names, grads_ok = self.step_graphs.run(self.step, indices)
+        else:
+            batch = self.train_rays.sample(self.config.train.batch_rays, self.ray_generator)
+            names, values, terms_ok, grad_names, grads_ok = self.step_body(batch, self.step)
+            if self.scaler is not None:
+                self.scaler.update()  # lowers the loss scale after an overflow (recorded by unscale_)
+            if self.step_graphs is not None:
+                self.step_graphs.eager_left -= 1
         self.scheduler.step()
-        pending = PendingStep(self.step, names, torch.cat([values.detach(), loss.detach()[None]]), terms_ok,
-                              [n for n, _ in with_grad], grads_ok, self.wall_before + time.perf_counter() - self._t0,
-                              float(self.scheduler.get_last_lr()[0]))
+        pending = PendingStep(self.step, names, values, terms_ok, grad_names, grads_ok,
+                              self.wall_before + time.perf_counter() - self._t0, self.last_lr())
         self._pending.append(pending)
         return pending
+
+    def last_lr(self) -> float:
+        """The learning rate of the next step, without reading the device."""
+        lr = self.scheduler.get_last_lr()[0]
+        if isinstance(lr, torch.Tensor):  # a CUDA graph's: Adam reads it on the device; the value is the schedule's
+            lr = self.scheduler.base_lrs[0] * self.scheduler.lr_lambdas[0](self.scheduler.last_epoch)
+        return float(lr)
 
     def flush_steps(self) -> list[dict[str, float] | None]:
         """Read every queued step from the device (one sync); their loss terms, or None for a skipped step.

@@ -203,12 +203,14 @@ class LiveSceneModel(nn.Module):
         return self.language_table.render(region_weights, values)
 
     def forward(self, rays: RayBundle, step: int = 0, generator: torch.Generator | None = None,
-                outputs: Collection[str] = RENDER_OUTPUTS) -> dict:
+                outputs: Collection[str] = RENDER_OUTPUTS, anneal: float | torch.Tensor | None = None) -> dict:
         """Render rays. In training mode the result holds what ``loss_dict`` needs; in eval, images only.
 
         ``outputs`` (eval) names what to render of ``RENDER_OUTPUTS``: a plain
         image needs only ``("rgb",)``, which skips the language table and the
         rendered logits (the probability field still runs: it places k).
+        ``anneal`` replaces the schedule's proposal exponent at ``step``: a
+        device tensor lets one captured CUDA graph serve every step (step_graphs.py).
         """
         cfg = self.config.sampling
         training = self.training
@@ -216,7 +218,7 @@ class LiveSceneModel(nn.Module):
             outputs = RENDER_OUTPUTS
         states = self.ray_states(rays)
         grad_prop = training and self.schedule.updates_proposals(step)
-        anneal = self.schedule.anneal(step)
+        anneal = self.schedule.anneal(step) if anneal is None else anneal
         samples = uniform_samples(rays.nears, rays.fars, cfg.num_proposal_samples[0], training, cfg.single_jitter,
                                   generator) if self.proposal_fields else uniform_samples(
             rays.nears, rays.fars, cfg.num_samples, training, cfg.single_jitter, generator)
@@ -227,7 +229,8 @@ class LiveSceneModel(nn.Module):
             levels.append((samples, lvl))
             n_next = cfg.num_proposal_samples[i + 1] if i + 1 < len(self.proposal_fields) else cfg.num_samples
             w = lvl["weights"].detach()
-            samples = pdf_samples(samples, w.clamp(min=0) ** anneal if anneal != 1.0 else w, n_next, training,
+            annealed = isinstance(anneal, torch.Tensor) or anneal != 1.0
+            samples = pdf_samples(samples, w.clamp(min=0) ** anneal if annealed else w, n_next, training,
                                   cfg.single_jitter, cfg.histogram_padding, generator)
         final = self._level(rays, samples, states, len(levels), final=True, grad_density=True,
                             want_rgb="rgb" in outputs)

@@ -1,0 +1,123 @@
+"""The whole training step as CUDA graphs (train.cuda_graphs): the same training as eager steps, never a host sync.
+
+The graph tests need a GPU (CI has none; benchmarks/gpu_check.sh runs them on a lent machine). On the CPU the
+setting is ignored, and what the graphs rely on is tested here: a device-tensor anneal exponent gives the
+schedule's samples, and the logged learning rate is read from the schedule, not from Adam's device tensor.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from stages.model import Trainer
+from stages.model.step_counters import count_host_syncs
+
+cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (CI has none)")
+# the schedule's every branch within a few steps: proposal gradients on some steps only, annealing then not
+# (proposal gradients from step 11 on every 2nd, from 16 every 3rd step; annealed until step 30)
+SCHEDULE = ["model.sampling.anneal_max_steps=30", "model.sampling.update_warmup=16", "model.sampling.update_every=3",
+            "train.log_every=1000"]
+
+
+def _targets(path, objects: list[str], dim: int = 16):
+    gen = np.random.default_rng(0)
+    np.savez(path, objects=np.array(objects), states=np.array([0.0, 1.0]),
+             embeddings=gen.normal(size=(len(objects), 2, dim)).astype(np.float32),
+             background=gen.normal(size=dim).astype(np.float32), encoder=np.array("test"))
+    return str(path)
+
+
+def _trainer(tiny_dataset, tmp_path, tiny_config, name: str, device: str, *extra: str, steps: int = 40) -> Trainer:
+    cfg = tiny_config(tiny_dataset.root, *SCHEDULE, *extra, steps=steps)
+    cfg.language_targets = _targets(tmp_path / "targets.npz", tiny_dataset.objects)
+    return Trainer(cfg, tmp_path / name, device=device, progress=False)
+
+
+def _queue(trainer: Trainer, n: int) -> None:
+    for _ in range(n):
+        trainer.train_step()
+        trainer.step += 1
+
+
+def _steps(trainer: Trainer, n: int) -> list[dict | None]:
+    _queue(trainer, n)
+    return trainer.flush_steps()
+
+
+def test_a_device_anneal_exponent_samples_as_the_schedule_does(tiny_dataset, tmp_path, tiny_config):
+    trainer = _trainer(tiny_dataset, tmp_path, tiny_config, "run", "cpu")
+    model, step = trainer.model, 5
+    anneal = model.schedule.anneal(step)
+    assert 0 < anneal < 1
+    batch = trainer.train_rays.sample(64, torch.Generator().manual_seed(0))
+    outs = []
+    for value in (anneal, torch.tensor(anneal)):
+        out = model(batch.rays, step=step, generator=torch.Generator().manual_seed(1), anneal=value)
+        outs.append(out["final"][0].bins)
+    torch.testing.assert_close(outs[0], outs[1])
+    plain = model(batch.rays, step=step, generator=torch.Generator().manual_seed(1), anneal=1.0)
+    assert not torch.allclose(plain["final"][0].bins, outs[0])  # the exponent is applied, not ignored
+
+
+def test_the_logged_learning_rate_never_reads_adams_device_tensor(tiny_dataset, tmp_path, tiny_config):
+    trainer = _trainer(tiny_dataset, tmp_path, tiny_config, "run", "cpu")
+    _steps(trainer, 3)
+    expected = float(trainer.scheduler.get_last_lr()[0])
+    assert trainer.last_lr() == expected
+    group = trainer.optimizer.param_groups[0]
+    group["lr"] = torch.tensor(group["lr"])  # as a CUDA graph's Adam holds it
+    trainer.scheduler.step()
+    with count_host_syncs(trainer.device) as syncs:
+        lr = trainer.last_lr()
+    assert not syncs
+    assert lr == pytest.approx(float(group["lr"]), rel=1e-6) and lr != expected  # the tensor is float32
+
+
+def test_cuda_graphs_are_ignored_on_the_cpu(tiny_dataset, tmp_path, tiny_config):
+    plain = _trainer(tiny_dataset, tmp_path, tiny_config, "plain", "cpu", steps=8)
+    graphs = _trainer(tiny_dataset, tmp_path, tiny_config, "graphs", "cpu", "train.cuda_graphs=true", steps=8)
+    assert graphs.step_graphs is None
+    assert _steps(plain, 8) == _steps(graphs, 8)
+    for (name, a), b in zip(plain.model.state_dict().items(), graphs.model.state_dict().values(), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0, equal_nan=True, msg=name)
+
+
+@cuda
+def test_cuda_graph_steps_train_as_eager_steps(tiny_dataset, tmp_path, tiny_config):
+    precision = "train.mixed_precision=off"  # float32 on both sides: only the atomics' order may differ
+    eager = _trainer(tiny_dataset, tmp_path, tiny_config, "eager", "cuda", precision)
+    graphs = _trainer(tiny_dataset, tmp_path, tiny_config, "graphs", "cuda", precision, "train.cuda_graphs=true")
+    a, b = _steps(eager, 40), _steps(graphs, 40)
+    assert set(graphs.step_graphs.captured) == {(True, True), (False, True), (True, False), (False, False)}
+    for step, (x, y) in enumerate(zip(a, b, strict=True)):
+        assert x is not None and y is not None, step
+        assert x.keys() == y.keys(), step
+        for term in x:
+            assert math.isclose(x[term], y[term], rel_tol=1e-2, abs_tol=1e-6), (step, term, x[term], y[term])
+    for (name, p), q in zip(eager.model.named_parameters(), graphs.model.parameters(), strict=True):
+        assert float((p - q).norm()) <= 1e-2 * float(p.norm()) + 1e-4, name
+    # Adam read the decaying learning rate from the device tensor the scheduler fills
+    assert float(graphs.optimizer.param_groups[0]["lr"]) == pytest.approx(graphs.last_lr(), rel=1e-6)
+    assert graphs.last_lr() < graphs.config.train.lr
+
+
+@cuda
+def test_cuda_graph_replays_never_sync_and_still_skip_nonfinite_steps(tiny_dataset, tmp_path, tiny_config):
+    trainer = _trainer(tiny_dataset, tmp_path, tiny_config, "run", "cuda", "train.max_nonfinite=100", steps=80)
+    assert all(r is not None for r in _steps(trainer, 36))  # every branch captured by now (a capture syncs)
+    assert len(trainer.step_graphs.captured) == 4
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")
+    try:
+        _queue(trainer, 20)
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
+    assert all(r is not None for r in trainer.flush_steps())
+    weight = next(p for p in trainer.model.field.parameters() if p.dim() > 1)
+    with torch.no_grad():
+        weight.fill_(float("nan"))  # the graph's finite checks are live: every later step is skipped on the device
+    assert _steps(trainer, 3) == [None, None, None]
