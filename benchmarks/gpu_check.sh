@@ -14,7 +14,7 @@ export PYTHONUNBUFFERED=1 HF_HUB_OFFLINE=1
 mkdir -p "$OUT"
 base=(--preset gpu-paper --device cuda --work "$WORK" --rounds 1 --steps 40)
 cuda=("${base[@]}" --rays 4096)
-graphs=(--set train.cuda_graphs=true)
+eager=(--set train.cuda_graphs=false)
 left() { local l=$((LIMIT - SECONDS)); echo $((l < $1 ? l : $1)); }
 
 echo "== machine"
@@ -27,17 +27,20 @@ timeout "$(left 150)" "$PY" -m pytest -q --tb=short -p no:cacheprovider tests/mo
   tests/model/test_fast_paths.py -k cuda > "$OUT/cuda_tests.txt" 2>&1
 tail -4 "$OUT/cuda_tests.txt"
 
-echo "== training throughput with train.cuda_graphs, every method, language on and off"
-timeout "$(left 200)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" "${graphs[@]}" 2>&1 | tee "$OUT/graphs.txt" \
-  | grep -v '^{'
+echo "== training throughput (the step replayed as CUDA graphs, the default), then eager steps"
+timeout "$(left 100)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" --methods livescene mk-planes 2>&1 \
+  | tee "$OUT/graphs.txt" | grep -v '^{'
+timeout "$(left 60)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" "${eager[@]}" --methods livescene mk-planes \
+  --language on 2>&1 | tee "$OUT/eager.txt" | grep -v '^{'
 
-echo "== the same, eager (the baseline on this machine)"
-timeout "$(left 150)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" --methods livescene mk-planes 2>&1 \
-  | tee "$OUT/eager.txt" | grep -v '^{'
+left=$(left 60)
+echo "== profile: LiveScene with language, graph replays"
+[ "$left" -gt 20 ] && timeout "$left" "$PY" benchmarks/profile_step.py --preset gpu-paper --device cuda --work "$WORK" \
+  --rays 4096 --language --rows 25 --out "$OUT/profile_full.txt" 2>&1 | grep -v USDT | tee "$OUT/profile.txt" | tail -32
 
 echo "== graphs, LiveScene with language: float32 (no bf16 autocast), then 8192 rays"
-timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" "${graphs[@]}" --methods livescene \
-  --language on --set train.mixed_precision=off 2>&1 | tee "$OUT/graphs_fp32.txt" | grep '^{'
-timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${base[@]}" --rays 8192 "${graphs[@]}" --methods livescene \
-  --language on 2>&1 | tee "$OUT/graphs_8192.txt" | grep '^{'
+timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" --methods livescene --language on \
+  --set "train.mixed_precision='off'" 2>&1 | tee "$OUT/graphs_fp32.txt" | grep '^{'
+timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${base[@]}" --rays 8192 --methods livescene --language on \
+  2>&1 | tee "$OUT/graphs_8192.txt" | grep '^{'
 echo "== done in $SECONDS s"

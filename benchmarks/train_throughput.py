@@ -165,6 +165,9 @@ def measure_one(args: argparse.Namespace) -> dict:
         "method": args.method, "language": args.language, "preset": args.preset, "device": str(device),
         "threads": torch.get_num_threads(), "rays": cfg.train.batch_rays,
         "step_ms": round(step_s * 1000, 1), "rays_per_s": round(cfg.train.batch_rays / step_s),
+        # the mean over whole cycles of the proposal schedule: after its warm-up, most steps skip proposal gradients
+        "mean_step_ms": round(sum(times) / len(times) * 1000, 1),
+        "mean_rays_per_s": round(cfg.train.batch_rays * len(times) / sum(times)),
         "ops": None if ops is None else int(sum(ops.values())), "syncs": int(sum(syncs.values())),
         "sync_calls": dict(syncs),
         "peak_mib": round(peak, 1), "peak_kind": kind, "reserved_mib": reserved,

@@ -301,10 +301,11 @@ class TrainConfig:
     """With ``compile``: torch.compile's mode. ``reduce-overhead`` replays each field's kernels as CUDA graphs
     (static shapes: one graph per distinct batch shape), which saves the launch cost of a step whose device
     work is shorter than its dispatch; on the CPU it only compiles for static shapes (no graphs there)."""
-    cuda_graphs: bool = False
+    cuda_graphs: bool = True
     """On CUDA: capture the whole training step (forward, losses, backward, finite checks, Adam) as CUDA graphs
-    and replay them, one launch per step instead of ~2,000 (step_graphs.py). Not with ``compile`` or fp16
-    autocast; ignored on the CPU."""
+    and replay them, one launch per step instead of ~2,500 ops' kernels (step_graphs.py; on an H200 1.8x the
+    eager rays/s). A run that compiles its fields or scales an fp16 loss trains eagerly, and says so. Ignored on
+    the CPU."""
 
 
 @dataclass

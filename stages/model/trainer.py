@@ -236,13 +236,13 @@ class Trainer:
             and self.device.type == "cuda"
         self.step_graphs = None
         if cfg.train.cuda_graphs and self.device.type == "cuda":
-            if cfg.train.compile:
-                raise InputError("train.cuda_graphs", "cannot capture a step whose fields torch.compile compiles",
-                                 "set train.compile=false (the whole step's graph replaces the fields' ones)")
-            if self.amp_dtype == torch.float16:
-                raise InputError("train.cuda_graphs", "fp16's loss scaler decides on the host at every step",
-                                 "use train.mixed_precision=bf16 or off with CUDA graphs")
-            self.step_graphs = StepGraphs(self)
+            # compiled fields bring their own graphs; fp16's loss scaler decides on the host at every step
+            eager_why = "train.compile is on" if cfg.train.compile else \
+                "fp16 autocast scales the loss" if self.amp_dtype == torch.float16 else ""
+            if eager_why:
+                print(f"train.cuda_graphs: eager steps, since {eager_why}", file=sys.stderr)
+            else:
+                self.step_graphs = StepGraphs(self)
         if self.language is not None:
             self.language = self.language.to(self.device)
         self._named_params = [(n, p) for n, p in self.model.named_parameters() if p.requires_grad]
@@ -659,6 +659,10 @@ class Trainer:
             "params": self.parameter_counts(),
             "peak_memory_mib": round(peak_memory_mib(self.device), 1),
             "peak_memory_kind": "cuda max_memory_allocated" if self.device.type == "cuda" else "process max RSS",
+            # CUDA graphs' replays allocate nothing: their private pools show in what the allocator reserved
+            "peak_reserved_mib": round(torch.cuda.max_memory_reserved(self.device) / 2**20, 1)
+            if self.device.type == "cuda" else None,
+            "cuda_graphs": self.step_graphs is not None,
             "objects": list(self.ds.objects),
             "state_mode": cfg.model.state.mode,
             "appearance": self.appearance,

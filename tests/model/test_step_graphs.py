@@ -78,8 +78,8 @@ def test_the_logged_learning_rate_never_reads_adams_device_tensor(tiny_dataset, 
 
 
 def test_cuda_graphs_are_ignored_on_the_cpu(tiny_dataset, tmp_path, tiny_config):
-    plain = _trainer(tiny_dataset, tmp_path, tiny_config, "plain", "cpu", steps=8)
-    graphs = _trainer(tiny_dataset, tmp_path, tiny_config, "graphs", "cpu", "train.cuda_graphs=true", steps=8)
+    plain = _trainer(tiny_dataset, tmp_path, tiny_config, "plain", "cpu", "train.cuda_graphs=false", steps=8)
+    graphs = _trainer(tiny_dataset, tmp_path, tiny_config, "graphs", "cpu", steps=8)  # on by default
     assert graphs.step_graphs is None
     assert _steps(plain, 8) == _steps(graphs, 8)
     for (name, a), b in zip(plain.model.state_dict().items(), graphs.model.state_dict().values(), strict=True):
@@ -88,9 +88,10 @@ def test_cuda_graphs_are_ignored_on_the_cpu(tiny_dataset, tmp_path, tiny_config)
 
 @cuda
 def test_cuda_graph_steps_train_as_eager_steps(tiny_dataset, tmp_path, tiny_config):
-    precision = "train.mixed_precision=off"  # float32 on both sides: only the atomics' order may differ
-    eager = _trainer(tiny_dataset, tmp_path, tiny_config, "eager", "cuda", precision)
-    graphs = _trainer(tiny_dataset, tmp_path, tiny_config, "graphs", "cuda", precision, "train.cuda_graphs=true")
+    precision = "train.mixed_precision='off'"  # float32 on both sides: only the atomics' order may differ
+    eager = _trainer(tiny_dataset, tmp_path, tiny_config, "eager", "cuda", precision, "train.cuda_graphs=false")
+    graphs = _trainer(tiny_dataset, tmp_path, tiny_config, "graphs", "cuda", precision)
+    assert eager.step_graphs is None
     a, b = _steps(eager, 40), _steps(graphs, 40)
     assert set(graphs.step_graphs.captured) == {(True, True), (False, True), (True, False), (False, False)}
     for step, (x, y) in enumerate(zip(a, b, strict=True)):
@@ -121,3 +122,13 @@ def test_cuda_graph_replays_never_sync_and_still_skip_nonfinite_steps(tiny_datas
     with torch.no_grad():
         weight.fill_(float("nan"))  # the graph's finite checks are live: every later step is skipped on the device
     assert _steps(trainer, 3) == [None, None, None]
+
+
+@cuda
+@pytest.mark.parametrize("setting,why", [("train.compile=true", "train.compile"),
+                                         ("train.mixed_precision=fp16", "fp16")])
+def test_cuda_runs_that_cannot_be_captured_train_eagerly_and_say_why(tiny_dataset, tmp_path, tiny_config, capsys,
+                                                                      setting, why):
+    trainer = _trainer(tiny_dataset, tmp_path, tiny_config, "run", "cuda", setting)
+    assert trainer.step_graphs is None
+    assert why in capsys.readouterr().err
