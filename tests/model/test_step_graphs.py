@@ -132,3 +132,19 @@ def test_cuda_runs_that_cannot_be_captured_train_eagerly_and_say_why(tiny_datase
     trainer = _trainer(tiny_dataset, tmp_path, tiny_config, "run", "cuda", setting)
     assert trainer.step_graphs is None
     assert why in capsys.readouterr().err
+
+
+@cuda
+def test_cuda_graph_training_evaluates_checkpoints_and_resumes(tiny_dataset, tmp_path, tiny_config):
+    def train(steps: int, resume: bool) -> dict:
+        cfg = tiny_config(tiny_dataset.root, *SCHEDULE, "train.eval_every=6", "train.checkpoint_every=6", steps=steps)
+        cfg.language_targets = _targets(tmp_path / "targets.npz", tiny_dataset.objects)
+        return Trainer(cfg, tmp_path / "run", device="cuda", progress=False, resume=resume).train()
+
+    first = train(12, resume=False)
+    assert first["cuda_graphs"] and first["steps"] == 12 and math.isfinite(first["eval_psnr"])
+    resumed = train(24, resume=True)  # a resumed run replays its own graphs again after its eager steps
+    assert resumed["steps"] == 24 and math.isfinite(resumed["eval_psnr"])
+    assert resumed["peak_reserved_mib"] >= resumed["peak_memory_mib"]
+    rows = (tmp_path / "run" / "train_log.csv").read_text().splitlines()[1:]
+    assert [int(r.split(",")[1]) for r in rows] == list(range(1, 25))
