@@ -13,7 +13,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from train_throughput import add_run_arguments, bench_config, bench_inputs
+from train_throughput import add_run_arguments, bench_config, bench_inputs, resolve_start_step
 
 from stages.scene.machine import machine_info, machine_line
 
@@ -27,6 +27,7 @@ def main() -> int:
     p.add_argument("--rows", type=int, default=25)
     p.add_argument("--out", type=Path, default=None, help="write the whole table here")
     args = p.parse_args()
+    resolve_start_step(args)
 
     import torch
     from torch.profiler import ProfilerActivity, profile

@@ -6,8 +6,11 @@ dataset (generated once into ``--work``) and runs real training steps (ray batch
 loss term, backward, finite checks, Adam). It prints one JSON line per configuration and a table:
 
 - ``step_ms``: median wall time of one step (CUDA: synchronised around each step), timed from step
-  ``--start-step`` on so the proposal schedule is that of a typical step;
-- ``rays_per_s``: batch rays / median step time;
+  ``--start-step`` on (default: 100 steps after the preset's proposal warm-up, 300 for cpu-demo and 5100 for
+  gpu-paper) so the proposal schedule is that of a typical step;
+- ``rays_per_s``: batch rays / median step time; ``mean_step_ms`` and ``mean_rays_per_s`` (JSON lines only): the
+  mean over the timed steps, the rate a run trains at when ``--steps`` covers whole cycles of the schedule (the
+  proposal nets take a gradient every ``update_every``-th step, and the median is the step without);
 - ``ops``: aten ops dispatched by one step, forward and backward;
 - ``syncs``: host-device synchronisations of one step that is not a logging step
   (``.item()``, ``bool(t)``, ``float(t)``, ``.tolist()``, ...);
@@ -72,15 +75,24 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--rays", type=int, default=0, help="rays per step (default: the preset's)")
     p.add_argument("--warmup", type=int, default=10)
-    p.add_argument("--start-step", type=int, default=300,
-                   help="step counter the timed steps start from (after cpu-demo's 200-step proposal warm-up, the "
-                        "proposal fields get gradients every 5th step)")
+    p.add_argument("--start-step", type=int, default=None,
+                   help="step counter the timed steps start from (default: 100 after the preset's proposal warm-up, "
+                        "from which the proposal fields get gradients every 5th step: 300 for cpu-demo, 5100 for "
+                        "gpu-paper; the GPU tables of 27-28 Nov in docs/model.md were timed from 300)")
     p.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
     p.add_argument("--capture", type=Path, default=DEMO_SPEC,
                    help="capture spec to train on (default: the demo's); e.g. config/captures/kitchen.yaml for four "
                         "objects, where MK-Planes has 21 planes per scale")
     p.add_argument("--work", type=Path, default=None,
                    help="where the capture and its dataset are cached (default: a temp folder named after the spec)")
+
+
+def resolve_start_step(args: argparse.Namespace) -> None:
+    """``--start-step`` by default: 100 steps into the preset's schedule after its proposal warm-up."""
+    if args.start_step is None:
+        from stages.model import load_config
+
+        args.start_step = load_config(args.preset, args.overrides).model.sampling.update_warmup + 100
 
 
 def bench_inputs(args: argparse.Namespace) -> tuple[Path, Path]:
@@ -250,6 +262,7 @@ def main() -> int:
     p.add_argument("--targets", type=Path, help=argparse.SUPPRESS)
     p.add_argument("--with-language", dest="with_language", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
+    resolve_start_step(args)
     if args.child:
         args.language = args.with_language
         print(json.dumps(measure_one(args)), flush=True)

@@ -46,7 +46,11 @@ class StepGraphs:
         self.eager_left = EAGER_STEPS
 
     def ready(self) -> bool:
+        """Whether the next step replays (after ``EAGER_STEPS`` eager ones)."""
         return self.eager_left <= 0
+
+    def eager_step_done(self) -> None:
+        self.eager_left -= 1
 
     def key(self, step: int) -> tuple[bool, bool]:
         """The schedule's Python branches at ``step``: proposal gradients, annealed proposal weights."""
@@ -57,7 +61,7 @@ class StepGraphs:
                                                               torch.Tensor]:
         """One step on the CPU-drawn ray ``indices``: what ``Trainer.step_body`` returns, copied out of the graph."""
         key = self.key(step)
-        captured = self.captured.get(key) or self._capture(key)
+        captured = self.captured.get(key) or self._capture(key, step)
         self.indices.copy_(indices.pin_memory(), non_blocking=True)
         if key[1]:
             self.anneal.fill_(self.trainer.model.schedule.anneal(step))
@@ -66,7 +70,8 @@ class StepGraphs:
         n_v, n_t = len(captured.names) + 1, len(captured.names)
         return captured.names, flat[:n_v], flat[n_v : n_v + n_t], captured.grad_names, flat[n_v + n_t :]
 
-    def _capture(self, key: tuple[bool, bool]) -> CapturedStep:
+    def _capture(self, key: tuple[bool, bool], step: int) -> CapturedStep:
+        """Record the step of ``key``'s branches; ``step`` (one with those branches) is what the model is told."""
         trainer = self.trainer
         optimizer = trainer.optimizer
         for group in optimizer.param_groups:
@@ -77,8 +82,6 @@ class StepGraphs:
         moments = len(optimizer.state)
         graph = torch.cuda.CUDAGraph()
         graph.register_generator_state(trainer.jitter_generator)
-        # the step that first needs this graph: its branches are the key's (the anneal value is the tensor's)
-        step = trainer.step
         with torch.cuda.graph(graph, pool=self.pool):
             batch = trainer.train_rays.batch(self.indices)
             names, values, terms_ok, grad_names, grads_ok = trainer.step_body(

@@ -436,7 +436,7 @@ class Trainer:
             if self.scaler is not None:
                 self.scaler.update()  # lowers the loss scale after an overflow (recorded by unscale_)
             if self.step_graphs is not None:
-                self.step_graphs.eager_left -= 1
+                self.step_graphs.eager_step_done()
         self.scheduler.step()
         pending = PendingStep(self.step, names, values, terms_ok, grad_names, grads_ok,
                               self.wall_before + time.perf_counter() - self._t0, self.last_lr())
