@@ -8,6 +8,8 @@ The jitter generator is registered with every graph, so each replay draws new nu
 decides in Python (whether the proposal nets get gradients, whether their weights are annealed at all) picks
 one of at most four graphs. Each is captured when the schedule first needs it, and all of them share one memory
 pool: a replay's outputs are copied out before the next replay, so no graph reads memory another one wrote.
+A step that cannot be captured (a configuration with an op that waits for the device, say) is named on stderr
+and training goes on with eager steps, the same rays and the same random numbers.
 """
 
 from __future__ import annotations
@@ -22,6 +24,10 @@ if TYPE_CHECKING:
 
 EAGER_STEPS = 3
 """Eager steps before the first capture: they create Adam's moments and every kernel's lazy state."""
+
+
+class GraphCaptureError(RuntimeError):
+    """A step could not be captured (an op that syncs or allocates on the host, say): the trainer goes on eagerly."""
 
 
 @dataclasses.dataclass
@@ -71,7 +77,24 @@ class StepGraphs:
         return captured.names, flat[:n_v], flat[n_v : n_v + n_t], captured.grad_names, flat[n_v + n_t :]
 
     def _capture(self, key: tuple[bool, bool], step: int) -> CapturedStep:
-        """Record the step of ``key``'s branches; ``step`` (one with those branches) is what the model is told."""
+        """Record the step of ``key``'s branches; ``step`` (one with those branches) is what the model is told.
+
+        Raises ``GraphCaptureError`` with Adam set up for eager steps and the jitter generator as it was before.
+        """
+        trainer = self.trainer
+        jitter = trainer.jitter_generator.get_state()
+        try:
+            return self._record(key, step)
+        except Exception as exc:
+            lr = trainer.last_lr()  # the schedule's value, not a float32 tensor's
+            for group in trainer.optimizer.param_groups:  # Adam as an eager run has it
+                group["capturable"], group["lr"] = False, lr
+            # a capture that CUDA invalidated can leave a registered generator in its capturing state
+            trainer.jitter_generator = torch.Generator(device=trainer.device)
+            trainer.jitter_generator.set_state(jitter)
+            raise GraphCaptureError(f"capturing the step at step {step} failed ({type(exc).__name__}: {exc})") from exc
+
+    def _record(self, key: tuple[bool, bool], step: int) -> CapturedStep:
         trainer = self.trainer
         optimizer = trainer.optimizer
         for group in optimizer.param_groups:

@@ -44,7 +44,7 @@ from .methods import SceneInfo, build_model
 from .ray_dataset import RayBatch, RayDataset, frame_times, state_vector
 from .run_inputs import config_differences, data_digest
 from .scene_normalization import SceneNormalization
-from .step_graphs import StepGraphs
+from .step_graphs import GraphCaptureError, StepGraphs
 
 MODEL_FORMAT = 2
 """2: K-Planes planes stored stacked per shape (``plane_groups.N``, was ``planes.N``)."""
@@ -426,12 +426,21 @@ class Trainer:
         self.model.train()
         if self._graph_steps:
             torch.compiler.cudagraph_mark_step_begin()
+        # the rays ``RayDataset.sample`` draws, the same for a replayed step and an eager one
+        n = self.config.train.batch_rays
+        indices = torch.randint(0, self.train_rays.n_rays, (n,), generator=self.ray_generator)
+        replayed = None
         if self.step_graphs is not None and self.step_graphs.ready():
-            indices = torch.randint(0, self.train_rays.n_rays, (self.config.train.batch_rays,),
-                                    generator=self.ray_generator)  # the rays ``RayDataset.sample`` draws
-            names, values, terms_ok, grad_names, grads_ok = self.step_graphs.run(self.step, indices)
+            try:
+                replayed = self.step_graphs.run(self.step, indices)
+            except GraphCaptureError as exc:
+                print(f"train.cuda_graphs: {exc}; eager steps from here (train.cuda_graphs=false skips the attempt)",
+                      file=sys.stderr)
+                self.step_graphs = None
+        if replayed is not None:
+            names, values, terms_ok, grad_names, grads_ok = replayed
         else:
-            batch = self.train_rays.sample(self.config.train.batch_rays, self.ray_generator)
+            batch = self.train_rays.batch(indices)
             names, values, terms_ok, grad_names, grads_ok = self.step_body(batch, self.step)
             if self.scaler is not None:
                 self.scaler.update()  # lowers the loss scale after an overflow (recorded by unscale_)

@@ -15,6 +15,7 @@ import torch
 
 from stages.model import Trainer
 from stages.model.step_counters import count_host_syncs
+from stages.model.step_graphs import StepGraphs
 
 cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (CI has none)")
 # the schedule's every branch within a few steps: proposal gradients on some steps only, annealing then not
@@ -148,3 +149,17 @@ def test_cuda_graph_training_evaluates_checkpoints_and_resumes(tiny_dataset, tmp
     assert resumed["peak_reserved_mib"] >= resumed["peak_memory_mib"]
     rows = (tmp_path / "run" / "train_log.csv").read_text().splitlines()[1:]
     assert [int(r.split(",")[1]) for r in rows] == list(range(1, 25))
+
+
+def test_a_step_that_cannot_be_captured_trains_on_eagerly_with_the_same_numbers(tiny_dataset, tmp_path, tiny_config,
+                                                                                capsys):
+    plain = _trainer(tiny_dataset, tmp_path, tiny_config, "plain", "cpu", "train.cuda_graphs=false", steps=8)
+    failing = _trainer(tiny_dataset, tmp_path, tiny_config, "failing", "cpu", steps=8)
+    failing.step_graphs = StepGraphs(failing)  # on the CPU no CUDA graph can be made: every capture fails
+    assert _steps(plain, 8) == _steps(failing, 8)
+    assert failing.step_graphs is None
+    assert "eager steps from here" in capsys.readouterr().err
+    group = failing.optimizer.param_groups[0]
+    assert isinstance(group["lr"], float) and not group["capturable"]
+    for (name, a), b in zip(plain.model.state_dict().items(), failing.model.state_dict().values(), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0, equal_nan=True, msg=name)
