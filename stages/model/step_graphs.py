@@ -1,4 +1,4 @@
-"""The whole training step replayed as CUDA graphs (``train.cuda_graphs``; docs/model.md, "Training on a GPU").
+"""The whole training step replayed as CUDA graphs (``train.cuda_graphs``; docs/model.md, "Whole-step CUDA graphs").
 
 A gpu-paper step launches about 2,000 kernels, and on an H100 the host's dispatch of them, not the device,
 bounds the step. Captured once, a step replays with one launch. What changes from step to step lives in device
