@@ -237,7 +237,9 @@ def compare_methods(cfg: CompareConfig, progress: bool = True) -> pd.DataFrame:
         row.update(score_run(run_dir, cfg.data, cfg.eval_frames, cfg.eval_scale))
         row.update({
             "params": run["params"]["total"], "field_params": run["params"].get("field"),
-            "peak_memory_mib": run["peak_memory_mib"], "train_seconds": run["train_seconds"],
+            # on a GPU the allocator's reserved peak: a CUDA graph's pool is reserved, not allocated
+            "peak_memory_mib": run.get("peak_reserved_mib") or run["peak_memory_mib"],
+            "train_seconds": run["train_seconds"],
             "steps": run["steps"], "train_psnr_rays": run.get("eval_psnr"), "status": run["status"],
         })
         rows.append(row)
@@ -249,7 +251,8 @@ def compare_methods(cfg: CompareConfig, progress: bool = True) -> pd.DataFrame:
         "device": cfg.device, "max_steps": cfg.max_steps, "overrides": cfg.overrides,
         "eval_frames": cfg.eval_frames, "eval_scale": cfg.eval_scale, "replay": cfg.replay or None,
         "isolated": cfg.isolate,
-        "torch": torch.__version__, "peak_memory_kind": "process max RSS" if cfg.device == "cpu" else "cuda",
+        "torch": torch.__version__,
+        "peak_memory_kind": "process max RSS" if cfg.device == "cpu" else "cuda max_memory_reserved",
         "methods": [{k: _jsonable(v) for k, v in r.items()} for r in table.to_dict(orient="records")],
     }
     write_json(out / "compare.json", meta)

@@ -272,12 +272,15 @@ def section_methods(sd: SceneData) -> str:
                      _metric(m, "held_out", "ssim", "mean"),
                      lpips, _metric(m, "unseen_combinations", "psnr", "mean"),
                      grounding if isinstance(grounding, (int, float)) else None,
-                     params, run.get("peak_memory_mib"), run.get("train_seconds"), run.get("steps"),
+                     # on a GPU the allocator's reserved peak: a CUDA graph's pool is reserved, not allocated
+                     params, run.get("peak_reserved_mib") or run.get("peak_memory_mib"), run.get("train_seconds"),
+                     run.get("steps"),
                      fps if isinstance(fps, (int, float)) else None])
     return ("<p>Held-out views of the test split; unseen combinations and grounding need truth and names. "
             "PSNR objects / static: the same views' PSNR over the pixels of any object mask and over the rest "
             "(what the states drive, and what they should leave alone). "
-            "Memory is the training process's peak (max RSS on CPU). Trust: a run under its config's trust "
+            "Memory is the training process's peak (max RSS on a CPU; on a GPU what the CUDA allocator reserved, "
+            "CUDA graphs' memory included). Trust: a run under its config's trust "
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names, held-out accumulation "
             "over object pixels: objects mostly transparent are painted on what lies behind them) or whose "
             "training did not complete is flagged, and its numbers are not results. "

@@ -280,3 +280,15 @@ def test_runs_on_different_machines_are_named_each():
     assert _machines_note(sd) == (" livescene, conerf trained on CPU A, 2 logical cores. mk-planes trained on CPU B, "
                                   "2 logical cores.")
     assert _machines_note(SimpleNamespace(methods=[method("livescene", None)])) == ""  # an older run.json: nothing
+
+
+def test_a_gpu_run_shows_the_memory_its_allocator_reserved(tmp_path, tiny_dataset):
+    """A run replayed as CUDA graphs allocates little after capture; its pool shows in the reserved peak."""
+    results = make_fake_results(tmp_path, tiny_dataset.root)
+    for run_json in results.glob("runs/*/run.json"):
+        run = json.loads(run_json.read_text())
+        run.update(peak_memory_mib=713.0, peak_reserved_mib=4052.0, cuda_graphs=True)
+        run_json.write_text(json.dumps(run))
+    html = render(tmp_path, fake_inputs(results, tiny_dataset.root)).read_text()
+    methods = html.split('<section id="methods">')[1].split("</section>")[0]
+    assert "4052" in methods and "713" not in methods
