@@ -15,7 +15,7 @@ import torch
 
 from stages.model import Trainer
 from stages.model.step_counters import count_host_syncs
-from stages.model.step_graphs import StepGraphs
+from stages.model.step_graphs import EAGER_STEPS, StepGraphs
 
 cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (CI has none)")
 # the schedule's every branch within a few steps: proposal gradients on some steps only, annealing then not
@@ -98,8 +98,11 @@ def test_cuda_graph_steps_train_as_eager_steps(tiny_dataset, tmp_path, tiny_conf
     for step, (x, y) in enumerate(zip(a, b, strict=True)):
         assert x is not None and y is not None, step
         assert x.keys() == y.keys(), step
+        # the first replays see the eager run's rays and jitter (the graph's generator offsets advance as eager
+        # steps do), so only the order of atomic adds separates them; later steps drift apart a little
+        tol = 1e-4 if step < EAGER_STEPS + 2 else 1e-2
         for term in x:
-            assert math.isclose(x[term], y[term], rel_tol=1e-2, abs_tol=1e-6), (step, term, x[term], y[term])
+            assert math.isclose(x[term], y[term], rel_tol=tol, abs_tol=1e-7), (step, term, x[term], y[term])
     for (name, p), q in zip(eager.model.named_parameters(), graphs.model.parameters(), strict=True):
         assert float((p - q).norm()) <= 1e-2 * float(p.norm()) + 1e-4, name
     # Adam read the decaying learning rate from the device tensor the scheduler fills
