@@ -43,4 +43,8 @@ timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" --methods
   --set "train.mixed_precision='off'" 2>&1 | tee "$OUT/graphs_fp32.txt" | grep '^{'
 timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${base[@]}" --rays 8192 --methods livescene --language on \
   2>&1 | tee "$OUT/graphs_8192.txt" | grep '^{'
+left=$(left 60)
+echo "== the planes' gradient: grid_sample's backward with the gradient spread over replicas of each plane"
+[ "$left" -gt 15 ] && timeout "$left" "$PY" benchmarks/plane_gradient.py --device cuda 2>&1 \
+  | tee "$OUT/plane_gradient.txt" | cut -c1-200
 echo "== done in $SECONDS s"
