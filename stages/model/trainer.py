@@ -360,6 +360,10 @@ class Trainer:
         self.model.load_state_dict(state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
+        for group in self.optimizer.param_groups:
+            # a CUDA graph run saves Adam capturable with a float32 device-tensor lr: resume in the eager form, at
+            # the schedule's exact value (a capture converts again)
+            group["capturable"], group["lr"] = False, self.last_lr()
         if self.scaler is not None and state.get("scaler"):
             self.scaler.load_state_dict(state["scaler"])
         rng = state["rng"]

@@ -166,3 +166,24 @@ def test_a_step_that_cannot_be_captured_trains_on_eagerly_with_the_same_numbers(
     assert isinstance(group["lr"], float) and not group["capturable"]
     for (name, a), b in zip(plain.model.state_dict().items(), failing.model.state_dict().values(), strict=True):
         torch.testing.assert_close(a, b, rtol=0, atol=0, equal_nan=True, msg=name)
+
+
+def test_a_checkpoint_of_a_graph_run_resumes_eagerly_as_if_uninterrupted(tiny_dataset, tmp_path, tiny_config):
+    """A CUDA graph run saves Adam with a device-tensor lr and ``capturable``; resumed where graphs are not used
+    (here the CPU, where ``capturable`` Adam refuses to step), Adam is set back to its eager form."""
+    def config(steps: int):
+        return tiny_config(tiny_dataset.root, "train.checkpoint_every=3", steps=steps)
+
+    Trainer(config(6), tmp_path / "straight", device="cpu", progress=False).train()
+    Trainer(config(3), tmp_path / "resumed", device="cpu", progress=False).train()
+    path = tmp_path / "resumed" / "checkpoints" / "step_000003.pt"
+    state = torch.load(path, weights_only=False)
+    for group in state["optimizer"]["param_groups"]:  # as a graph run writes them
+        group["lr"], group["capturable"] = torch.tensor(group["lr"]), True
+    state["scheduler"]["_last_lr"] = [torch.tensor(v) for v in state["scheduler"]["_last_lr"]]
+    torch.save(state, path)
+    Trainer(config(6), tmp_path / "resumed", device="cpu", progress=False, resume=True).train()
+    a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
+    b = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]
+    for name in a:
+        torch.testing.assert_close(a[name], b[name], rtol=0, atol=0, equal_nan=True, msg=name)
