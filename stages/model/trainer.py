@@ -675,7 +675,7 @@ class Trainer:
             # CUDA graphs' replays allocate nothing: their private pools show in what the allocator reserved
             "peak_reserved_mib": round(torch.cuda.max_memory_reserved(self.device) / 2**20, 1)
             if self.device.type == "cuda" else None,
-            "cuda_graphs": self.step_graphs is not None,
+            "cuda_graphs": bool(self.step_graphs is not None and self.step_graphs.captured),  # steps were replayed
             "objects": list(self.ds.objects),
             "state_mode": cfg.model.state.mode,
             "appearance": self.appearance,
