@@ -231,8 +231,8 @@ class Trainer:
         self.model = build_model(cfg.method, cfg.model, self.info).to(self.device)
         if cfg.train.compile:
             compile_fields(self.model, cfg.train.compile_mode)
-        # CUDA graph replays overwrite their last outputs: each step starts a new generation of them
-        self._graph_steps = cfg.train.compile and cfg.train.compile_mode == "reduce-overhead" \
+        # compiled fields' CUDA graph replays overwrite their last outputs: each step starts a new generation of them
+        self._compiled_graphs = cfg.train.compile and cfg.train.compile_mode == "reduce-overhead" \
             and self.device.type == "cuda"
         self.step_graphs = None
         if cfg.train.cuda_graphs and self.device.type == "cuda":
@@ -428,7 +428,7 @@ class Trainer:
         With ``train.cuda_graphs`` on CUDA the step is a graph replay after a few eager steps.
         """
         self.model.train()
-        if self._graph_steps:
+        if self._compiled_graphs:
             torch.compiler.cudagraph_mark_step_begin()
         # the rays ``RayDataset.sample`` draws, the same for a replayed step and an eager one
         n = self.config.train.batch_rays

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
+from random_targets import random_language_targets
 
 from stages.model import Trainer, load_config
 from stages.model.config import ModelConfig
@@ -74,17 +73,9 @@ def test_region_weighted_language_equals_per_sample_lookup(mode, interpolate_by,
         assert states.grad is None  # neither formulation sends a gradient into the states
 
 
-def _language_targets(path: Path, objects: list[str]) -> Path:
-    gen = np.random.default_rng(0)
-    np.savez(path, objects=np.array(objects), states=np.array([0.0, 1.0]),
-             embeddings=gen.normal(size=(len(objects), 2, DIM)).astype(np.float32),
-             background=gen.normal(size=DIM).astype(np.float32), encoder=np.array("test"))
-    return path
-
-
 @pytest.mark.parametrize("extra", [[], ["model.state.mode=learned"]])
 def test_training_steps_between_log_intervals_make_no_host_sync(tiny_dataset, tmp_path, tiny_config, extra):
-    targets = _language_targets(tmp_path / "targets.npz", tiny_dataset.objects)
+    targets = random_language_targets(tmp_path / "targets.npz", tiny_dataset.objects, DIM)
     cfg = tiny_config(tiny_dataset.root, *extra, steps=20)
     cfg.language_targets = str(targets)
     trainer = Trainer(cfg, tmp_path / "run", device="cpu", progress=False)
@@ -172,7 +163,7 @@ def test_render_fast_path_matches_full_render_within_its_bound(trained_run, monk
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (CI has none)")
 def test_cuda_training_steps_pass_sync_debug_mode_error(tiny_dataset, tmp_path, tiny_config):
-    targets = _language_targets(tmp_path / "targets.npz", tiny_dataset.objects)
+    targets = random_language_targets(tmp_path / "targets.npz", tiny_dataset.objects, DIM)
     # eager steps (a graph's capture syncs once; test_step_graphs.py checks its replays)
     cfg = tiny_config(tiny_dataset.root, "train.log_every=1000", "train.cuda_graphs=false", steps=40)
     cfg.language_targets = str(targets)

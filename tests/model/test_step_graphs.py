@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 import torch
+from random_targets import random_language_targets
 
 from stages.model import Trainer
 from stages.model.step_counters import count_host_syncs
@@ -24,17 +24,9 @@ SCHEDULE = ["model.sampling.anneal_max_steps=30", "model.sampling.update_warmup=
             "train.log_every=1000"]
 
 
-def _targets(path, objects: list[str], dim: int = 16):
-    gen = np.random.default_rng(0)
-    np.savez(path, objects=np.array(objects), states=np.array([0.0, 1.0]),
-             embeddings=gen.normal(size=(len(objects), 2, dim)).astype(np.float32),
-             background=gen.normal(size=dim).astype(np.float32), encoder=np.array("test"))
-    return str(path)
-
-
 def _trainer(tiny_dataset, tmp_path, tiny_config, name: str, device: str, *extra: str, steps: int = 40) -> Trainer:
     cfg = tiny_config(tiny_dataset.root, *SCHEDULE, *extra, steps=steps)
-    cfg.language_targets = _targets(tmp_path / "targets.npz", tiny_dataset.objects)
+    cfg.language_targets = str(random_language_targets(tmp_path / "targets.npz", tiny_dataset.objects))
     return Trainer(cfg, tmp_path / name, device=device, progress=False)
 
 
@@ -142,7 +134,7 @@ def test_cuda_runs_that_cannot_be_captured_train_eagerly_and_say_why(tiny_datase
 def test_cuda_graph_training_evaluates_checkpoints_and_resumes(tiny_dataset, tmp_path, tiny_config):
     def train(steps: int, resume: bool) -> dict:
         cfg = tiny_config(tiny_dataset.root, *SCHEDULE, "train.eval_every=6", "train.checkpoint_every=6", steps=steps)
-        cfg.language_targets = _targets(tmp_path / "targets.npz", tiny_dataset.objects)
+        cfg.language_targets = str(random_language_targets(tmp_path / "targets.npz", tiny_dataset.objects))
         return Trainer(cfg, tmp_path / "run", device="cuda", progress=False, resume=resume).train()
 
     first = train(12, resume=False)

@@ -219,6 +219,7 @@ class LiveSceneModel(nn.Module):
         states = self.ray_states(rays)
         grad_prop = training and self.schedule.updates_proposals(step)
         anneal = self.schedule.anneal(step) if anneal is None else anneal
+        annealed = isinstance(anneal, torch.Tensor) or anneal != 1.0
         samples = uniform_samples(rays.nears, rays.fars, cfg.num_proposal_samples[0], training, cfg.single_jitter,
                                   generator) if self.proposal_fields else uniform_samples(
             rays.nears, rays.fars, cfg.num_samples, training, cfg.single_jitter, generator)
@@ -229,7 +230,6 @@ class LiveSceneModel(nn.Module):
             levels.append((samples, lvl))
             n_next = cfg.num_proposal_samples[i + 1] if i + 1 < len(self.proposal_fields) else cfg.num_samples
             w = lvl["weights"].detach()
-            annealed = isinstance(anneal, torch.Tensor) or anneal != 1.0
             samples = pdf_samples(samples, w.clamp(min=0) ** anneal if annealed else w, n_next, training,
                                   cfg.single_jitter, cfg.histogram_padding, generator)
         final = self._level(rays, samples, states, len(levels), final=True, grad_density=True,
