@@ -366,15 +366,16 @@ class Trainer:
             group["capturable"], group["lr"] = False, self.last_lr()
         if self.scaler is not None and state.get("scaler"):
             self.scaler.load_state_dict(state["scaler"])
-        rng = state["rng"]
+        # generator states are CPU byte tensors, whatever the generator's device; a checkpoint loaded onto CUDA
+        # (map_location) holds them there
+        rng = {k: v.cpu() if isinstance(v, torch.Tensor) else v for k, v in state["rng"].items()}
         torch.set_rng_state(rng["torch"])
         if rng.get("cuda") is not None and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all(rng["cuda"])
+            torch.cuda.set_rng_state_all([s.cpu() for s in rng["cuda"]])
         np.random.set_state(rng["numpy"])
         random.setstate(rng["python"])
         self.ray_generator.set_state(rng["rays"])
-        self.jitter_generator.set_state(rng["jitter"].to(self.jitter_generator.device)
-                                        if hasattr(rng["jitter"], "to") else rng["jitter"])
+        self.jitter_generator.set_state(rng["jitter"])
         self.step = int(state["step"])
         self.wall_before = float(state["wall_s"])
         self.nonfinite_streak = int(state.get("nonfinite_streak", 0))
