@@ -44,7 +44,8 @@ timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${cuda[@]}" --methods
 timeout "$(left 40)" "$PY" benchmarks/train_throughput.py "${base[@]}" --rays 8192 --methods livescene --language on \
   2>&1 | tee "$OUT/graphs_8192.txt" | grep '^{'
 left=$(left 60)
-echo "== the planes' gradient: grid_sample's backward with the gradient spread over replicas of each plane"
-[ "$left" -gt 15 ] && timeout "$left" "$PY" benchmarks/plane_gradient.py --device cuda 2>&1 \
+echo "== the planes' gradient: grid_sample's backward, index_add_ into channels-last rows, spread over replicas"
+[ "$left" -gt 15 ] && timeout "$left" "$PY" benchmarks/plane_gradient.py --device cuda --repeats 5 \
+  --variants grid_sample index_add replicas:4 2>&1 \
   | tee "$OUT/plane_gradient.txt" | cut -c1-200
 echo "== done in $SECONDS s"
