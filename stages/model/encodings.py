@@ -193,14 +193,15 @@ class KPlanesEncoding(nn.Module):
         """The product over every plane of ``sample(g, stack)``'s per-plane features of group ``g``, in its layout."""
         out: torch.Tensor | None = None
         for g, stack in enumerate(self.plane_groups):
-            f = sample(g, stack)
-            for j in range(f.shape[0]):  # products by hand: prod()'s backward looks for zeros (a host sync)
+            # products by hand: prod()'s backward looks for zeros (a host sync). unbind, not f[j]: the backward
+            # of each f[j] zero-fills a gradient of all of f and adds it into f's, unbind's stacks the slices once
+            for plane in sample(g, stack).unbind(0):
                 if out is None:
-                    out = f[j]
+                    out = plane
                 elif in_place:
-                    out.mul_(f[j])
+                    out.mul_(plane)
                 else:
-                    out = out * f[j]
+                    out = out * plane
         assert out is not None
         return out
 
