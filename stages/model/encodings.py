@@ -209,7 +209,7 @@ class KPlanesEncoding(nn.Module):
         """``coords`` [N, n_dims] in [-1, 1] -> features [C, N] (grid_sample's layout)."""
         def sample(g: int, stack: torch.Tensor) -> torch.Tensor:
             grid = plane_grid(coords, self.group_pairs(g), self.group_is_spatial(g), cache).to(stack.dtype)
-            return F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
+            return F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True).squeeze(-1)
 
         return self._product(sample, in_place=False)
 

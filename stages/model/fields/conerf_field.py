@@ -56,7 +56,8 @@ class ConerfField(nn.Module):
         spatial = self.encoding(coords[:, :3], cache)
         attrs = attribute_encoding(coords[:, 3:].to(spatial.dtype), self.conerf.attribute_frequencies)
         h = self.density_mlp(torch.cat([spatial, attrs], dim=-1))
-        raw, geo = h[:, 0], h[:, 1:]
+        raw, geo = h.split([1, h.shape[1] - 1], dim=1)  # one gradient for h (two slices' would each zero-fill one)
+        raw = raw.squeeze(1)
         return trunc_exp(raw + self.config.density_bias, self.config.density_exp_clamp), geo
 
     def color(self, geo: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:

@@ -26,5 +26,5 @@ class DensityField(nn.Module):
 
     def forward(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> torch.Tensor:
         """``coords`` [N, D] in [-1, 1] -> density [N] (float32)."""
-        raw = self.mlp(self.encoding(coords, cache))[:, 0]
+        raw = self.mlp(self.encoding(coords, cache)).squeeze(1)  # a view: [:, 0]'s backward zero-fills a copy
         return trunc_exp(raw + self.density_bias, self.exp_clamp)

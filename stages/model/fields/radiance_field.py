@@ -36,7 +36,8 @@ class RadianceField(nn.Module):
     def density(self, coords: torch.Tensor, cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """``coords`` [N, D] in [-1, 1] -> density [N] (float32), geometry features [N, geo_feat_dim]."""
         h = self.density_mlp(self.encoding(coords, cache))
-        raw, geo = h[:, 0], h[:, 1:]
+        raw, geo = h.split([1, h.shape[1] - 1], dim=1)  # one gradient for h (two slices' would each zero-fill one)
+        raw = raw.squeeze(1)
         sigma = trunc_exp(raw + self.config.density_bias, self.config.density_exp_clamp)
         return sigma, geo
 
