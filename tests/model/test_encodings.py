@@ -164,3 +164,30 @@ def test_bilinear_rows_indexes_planes_of_more_than_2_24_vertices():
     grid = torch.tensor([[0.9992, 0.9999], [0.9982, 0.9996], [1.0, 1.0], [-1.0, 1.0], [0.3, -0.7]]).view(1, 5, 1, 2)
     expected = F.grid_sample(stack, grid, mode="bilinear", padding_mode="border", align_corners=True)[..., 0]
     assert torch.equal(bilinear_rows(stack, grid).permute(0, 2, 1), expected)
+
+
+def test_gradients_equal_a_plane_by_plane_product():
+    """The stacked sampling (one grid_sample per stack, planes taken by unbind, output by squeeze) gives the
+    gradients of sampling each plane alone and multiplying, for the planes and for a k coordinate that needs one."""
+    torch.manual_seed(0)
+    enc = KPlanesEncoding([6, 5, 7, 4], channels=3, spatial_dims=3)
+    with torch.no_grad():
+        for p in enc.plane_groups:
+            p.uniform_(0.5, 1.5)
+    coords = (torch.rand(40, 4) * 2 - 1).requires_grad_(True)
+    weights = torch.randn(40, 3)
+    (enc(coords) * weights).sum().backward()
+    stacked = [p.grad.clone() for p in enc.plane_groups], coords.grad.clone()
+    enc.zero_grad(set_to_none=True)
+    coords.grad = None
+    out = torch.ones(3, 40)
+    for (a, b), plane in zip(enc.pairs, enc.planes, strict=True):
+        # only the spatial planes' grids are detached (the fields' positions need no gradient; k may)
+        grid = torch.stack((coords[:, a], coords[:, b]), dim=-1).view(1, 40, 1, 2)
+        grid = grid if b >= 3 else grid.detach()
+        out = out * F.grid_sample(plane, grid, mode="bilinear", padding_mode="border", align_corners=True)[0, :, :, 0]
+    (out.t() * weights).sum().backward()
+    for got, want in zip(stacked[0], [p.grad for p in enc.plane_groups], strict=True):
+        torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(stacked[1], coords.grad, rtol=1e-5, atol=1e-6)
+    assert stacked[1][:, 3].abs().sum() > 0
