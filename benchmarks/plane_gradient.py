@@ -14,9 +14,11 @@ sample it (border padding, aligned corners) and its forward and backward are tim
   copy; autograd sums the copies' gradients, so R times fewer samples meet on one vertex.
 
 All give the same gradient up to the order of the additions (``grad_max_rel_diff`` against the first).
+Measured on two H200s (docs/model.md, "The planes' gradient, measured"): none is cheaper on every stack, and
+in the whole replayed training step grid_sample's own backward stays the fastest.
 ``--k-values K`` gives the k axis (the second coordinate of the non-spatial stacks) K distinct values, as a
 batch of rays from K frames does (0: uniform). It prints one JSON line per configuration: median ms of
-forward + backward (CUDA: synchronised), samples per second, peak memory::
+forward + backward (CUDA: synchronised), samples per second, peak memory and the 1-minute load::
 
     python3 benchmarks/plane_gradient.py --device cuda
     .venv/bin/python benchmarks/plane_gradient.py --device cpu --samples-scale 0.05   # a smoke run
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 
 import this_checkout  # noqa: F401  (this checkout's stages)
@@ -153,6 +156,7 @@ def main() -> int:
                     "peak_mib": round(torch.cuda.max_memory_allocated(device) / 2**20, 1)
                     if device.type == "cuda" else None,
                     "device": torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu",
+                    "load": round(os.getloadavg()[0], 2),
                 }), flush=True)
     return 0
 
