@@ -313,6 +313,7 @@ class Trainer:
             },
             "config": self.config.to_dict(),
             "data_digest": self.data_digest,
+            "device_type": self.device.type,  # whose generator the jitter state is
         }
         path = self.checkpoint_path(self.step)
         with atomic_path(path, suffix=".pt") as tmp:
@@ -371,11 +372,20 @@ class Trainer:
         rng = {k: v.cpu() if isinstance(v, torch.Tensor) else v for k, v in state["rng"].items()}
         torch.set_rng_state(rng["torch"])
         if rng.get("cuda") is not None and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all([s.cpu() for s in rng["cuda"]])
+            for i, cuda_state in enumerate(rng["cuda"][: torch.cuda.device_count()]):
+                torch.cuda.set_rng_state(cuda_state.cpu(), i)
         np.random.set_state(rng["numpy"])
         random.setstate(rng["python"])
-        self.ray_generator.set_state(rng["rays"])
-        self.jitter_generator.set_state(rng["jitter"])
+        self.ray_generator.set_state(rng["rays"])  # a CPU generator on every device
+        written_on = state.get("device_type", self.device.type)  # older checkpoints: taken as this device's
+        if written_on == self.device.type:
+            self.jitter_generator.set_state(rng["jitter"])
+        else:
+            # a CPU generator's state (Mersenne Twister) does not fit a CUDA one (Philox seed and offset) or back
+            self.jitter_generator.manual_seed(self.config.seed + 1 + int(state["step"]))
+            print(f"{self.out}: the checkpoint was written on {written_on}, training goes on on {self.device.type} "
+                  "with the sample jitter reseeded: a run repeats an uninterrupted one only on the device it began on",
+                  file=sys.stderr)
         self.step = int(state["step"])
         self.wall_before = float(state["wall_s"])
         self.nonfinite_streak = int(state.get("nonfinite_streak", 0))

@@ -51,6 +51,32 @@ def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_conf
     assert steps == [1, 2, 3, 4, 5]
 
 
+def test_a_checkpoint_from_another_device_resumes_with_the_jitter_reseeded(tiny_dataset, tmp_path, tiny_config,
+                                                                             capsys):
+    """A run begun on a GPU and continued on a CPU (or back): the generator states of one device do not fit the
+    other's generators, so the jitter is reseeded from the step; training goes on and says so."""
+    first = tmp_path / "first"
+    Trainer(tiny_config(tiny_dataset.root, "train.checkpoint_every=2", steps=2), first, device="cpu",
+            progress=False).train()
+    ckpt = first / "checkpoints" / "step_000002.pt"
+    state = torch.load(ckpt, weights_only=False)
+    assert state["device_type"] == "cpu"
+    # as a CUDA run writes it: its jitter generator's state is a Philox seed and offset (16 bytes)
+    state["device_type"], state["rng"]["jitter"] = "cuda", torch.zeros(16, dtype=torch.uint8)
+    weights = []
+    for name in ("a", "b"):
+        run = tmp_path / name
+        (run / "checkpoints").mkdir(parents=True)
+        torch.save(state, run / "checkpoints" / ckpt.name)
+        summary = Trainer(tiny_config(tiny_dataset.root, "train.checkpoint_every=2", steps=4), run, device="cpu",
+                          progress=False, resume=True).train()
+        assert summary["steps"] == 4
+        assert "written on cuda, training goes on on cpu with the sample jitter reseeded" in capsys.readouterr().err
+        weights.append(_weights(run))
+    for k in weights[0]:  # the reseeding is deterministic
+        torch.testing.assert_close(weights[0][k], weights[1][k], rtol=0, atol=0, equal_nan=True, msg=k)
+
+
 def test_run_files_log_columns_and_run_json(trained_run):
     run = json.loads((trained_run / "run.json").read_text())
     assert run["steps"] == 4 and run["status"] == "completed" and run["device"] == "cpu"
