@@ -161,6 +161,29 @@ def test_render_fast_path_matches_full_render_within_its_bound(trained_run, monk
     assert np.abs(fast["rgb"] - full["rgb"]).max() <= bound + 1e-6
 
 
+@pytest.mark.parametrize("training", [True, False])
+def test_each_sample_is_coloured_at_its_own_rays_direction(monkeypatch, training):
+    """Directions are encoded once per ray; every sample must still get its own ray's encoding (both paths)."""
+    from stages.model.methods import livescene
+    from stages.model.ray_samplers import uniform_samples
+    from stages.model.rays import RayBundle
+
+    torch.manual_seed(0)
+    model = _model(2, "kappa").train(training)
+    r, s = 29, 7
+    dirs = torch.nn.functional.normalize(torch.randn(r, 3), dim=-1)
+    rays = RayBundle(torch.zeros(r, 3), dirs, torch.full((r,), 0.1), torch.full((r,), 1.5), torch.rand(r, ALPHA))
+    samples = uniform_samples(rays.nears, rays.fars, s, False, False, None)
+    seen: list[torch.Tensor] = []
+    colour = model.field.color
+    monkeypatch.setattr(model.field, "color", lambda geo, enc: seen.append(enc) or colour(geo, enc))
+    monkeypatch.setattr(livescene, "RENDER_WEIGHT_FLOOR", -1.0)  # the render path colours every sample too
+    with torch.no_grad():
+        out = model._level(rays, samples, rays.states, 0, final=True, grad_density=False)
+    assert out["rgb"].shape == (r, s, 3)
+    assert torch.equal(seen[0], model.field.direction_encoding(dirs.repeat_interleave(s, dim=0)))
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (CI has none)")
 def test_cuda_training_steps_pass_sync_debug_mode_error(tiny_dataset, tmp_path, tiny_config):
     targets = random_language_targets(tmp_path / "targets.npz", tiny_dataset.objects, DIM)

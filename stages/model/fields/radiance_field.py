@@ -41,13 +41,14 @@ class RadianceField(nn.Module):
         sigma = trunc_exp(raw + self.config.density_bias, self.config.density_exp_clamp)
         return sigma, geo
 
-    def color(self, geo: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
-        """Geometry features [N, geo_feat_dim] and unit view directions [N, 3] -> rgb [N, 3] in (0, 1)."""
-        d = self.direction_encoding(directions).to(geo.dtype)
+    def color(self, geo: torch.Tensor, encoded_directions: torch.Tensor) -> torch.Tensor:
+        """Geometry features [N, geo_feat_dim] and ``direction_encoding`` of the view directions [N, sh] -> rgb
+        [N, 3] in (0, 1). The encoding is the caller's: it depends on the ray only, so it is computed per ray."""
+        d = encoded_directions.to(geo.dtype)
         return torch.sigmoid(self.color_mlp(torch.cat([d, geo], dim=-1)).float())
 
     def forward(self, coords: torch.Tensor, directions: torch.Tensor,
                 cache: PlaneGrids | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """-> density [N], rgb [N, 3] in (0, 1)."""
         sigma, geo = self.density(coords, cache)
-        return sigma, self.color(geo, directions)
+        return sigma, self.color(geo, self.direction_encoding(directions))

@@ -163,16 +163,18 @@ class LiveSceneModel(nn.Module):
             sigma, geo = self.field.density(coords, grids)
             weights = render_weights(sigma.view(n_rays, n_samp), samples.deltas)
             if want_rgb:
-                dirs = rays.directions[:, None, :].expand(n_rays, n_samp, 3)
+                # the samples of a ray share its direction: encoded once per ray, each sample takes its ray's row
+                sh = self.field.direction_encoding(rays.directions)
                 if self.training:
-                    rgb = self.field.color(geo, dirs.reshape(-1, 3))
+                    per_sample = sh[:, None, :].expand(n_rays, n_samp, sh.shape[-1])
+                    rgb = self.field.color(geo, per_sample.reshape(n_rays * n_samp, -1))
                 else:  # rendering: no colour for samples the image cannot see (error <= samples x floor per pixel)
                     visible = weights > RENDER_WEIGHT_FLOOR
                     if self.last_sample_behind:
                         visible[:, -1] = True  # its colour shows behind the ray
                     keep = visible.reshape(-1).nonzero()[:, 0]
                     rgb = torch.zeros(n_rays * n_samp, 3, device=geo.device)
-                    rgb[keep] = self.field.color(geo[keep], dirs.reshape(-1, 3)[keep])
+                    rgb[keep] = self.field.color(geo[keep], sh[keep // n_samp])
                 out["rgb"] = rgb.view(n_rays, n_samp, 3)
         else:
             with torch.set_grad_enabled(grad_density and torch.is_grad_enabled()):
