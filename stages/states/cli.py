@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from stages.scene.cli_errors import cli_errors
@@ -73,5 +74,8 @@ def main(argv: list[str] | None = None) -> int:
         errs = ", ".join(f"{m} {v['mae']:.3f}" for m, v in loo.items() if v["mae"] is not None) or "n/a"
         print(f"{name}: {summary['n_key_frames'][name]} key frames, method {summary['methods'][name]}, "
               f"leave-one-out MAE {errs}")
+    for name in summary["still"]:
+        print(f"note: {name!r} barely moves in its key frames (values span {summary['key_span'][name]:.3f} of "
+              f"[0, 1]): the capture does not show its other states, so they cannot be learned", file=sys.stderr)
     print(f"{args.out}: states for {summary['n_frames']} frames x {len(summary['objects'])} objects")
     return 0

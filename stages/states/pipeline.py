@@ -22,6 +22,10 @@ from .errors import StateError
 from .frame_table import FrameTable, read_frame_table
 from .interpolation import METHODS, interpolate, leave_one_out
 
+STILL_SPAN = 0.1
+"""An object whose normalised key values span less than this is named as barely moving: the capture does not
+show its other states, so they cannot be learned (annotation noise alone spans a few hundredths)."""
+
 
 @dataclass
 class StatesConfig:
@@ -104,10 +108,12 @@ def object_range(config: StatesConfig, ann: Annotations, name: str, kvs: list[Ke
                              f"[{lo}, {hi}] ({source})", "fix the value or widen the range")
         return {"lo": float(lo), "hi": float(hi), "source": source}
     lo, hi = float(values.min()), float(values.max())
+    if lo >= 0.0 and hi <= 1.0:
+        # already the [0, 1] states LiveScene trains on: min-max would stretch whatever span the key frames cover to
+        # the whole range, so an object that stays shut, annotated with a little noise, would read as fully open
+        return {"lo": 0.0, "hi": 1.0, "source": "key values within [0, 1]: kept as given"}
     if hi > lo:
         return {"lo": lo, "hi": hi, "source": "min-max of key frames"}
-    if 0.0 <= lo <= 1.0:
-        return {"lo": 0.0, "hi": 1.0, "source": "constant key frames, already in [0, 1]: kept as given"}
     raise StateError(ann.path, f"row {kvs[0].row}: {name!r} has the single value {lo} on every key frame, "
                      "which min-max normalisation cannot map to [0, 1]", f"pass --range {name}=LO,HI")
 
@@ -131,7 +137,7 @@ def compute_states(config: StatesConfig) -> dict:
     rows = []
     summary: dict = {"key_frames_file": str(config.key_frames), "format": ann.format, "frames_file": str(frames.path),
                      "n_frames": len(frames.names), "objects": order, "methods": {}, "ranges": {},
-                     "n_key_frames": {}, "leave_one_out": {}, "suggested_method": {},
+                     "n_key_frames": {}, "key_span": {}, "still": [], "leave_one_out": {}, "suggested_method": {},
                      "hold": "outside the annotated range every method holds the first / last key value"}
     normalised_keys: dict[int, dict[str, float]] = {}
     for name in order:
@@ -156,6 +162,9 @@ def compute_states(config: StatesConfig) -> dict:
         summary["methods"][name] = method
         summary["ranges"][name] = rng
         summary["n_key_frames"][name] = len(kvs)
+        summary["key_span"][name] = float(key_y.max() - key_y.min())
+        if summary["key_span"][name] < STILL_SPAN:
+            summary["still"].append(name)
         summary["leave_one_out"][name] = loo
         summary["suggested_method"][name] = (min(scored, key=lambda m: (round(loo[m]["mae"], 12), m != "pchip"))
                                              if scored else None)

@@ -144,7 +144,7 @@ def test_constant_value_outside_unit_range_needs_a_range(tmp_path):
                                          r"--range door=LO,HI"):
         run(tmp_path, keys)
     keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0.5\n10,door,0.5\n")
-    assert run(tmp_path, keys)["ranges"]["door"]["source"].startswith("constant key frames")
+    assert run(tmp_path, keys)["ranges"]["door"]["source"] == "key values within [0, 1]: kept as given"
 
 
 def test_option_for_an_unknown_object_or_method(tmp_path):

@@ -43,7 +43,7 @@ frame_00020:
     assert door.loc[:, "value"].between(0, 1).all()
     report = json.loads((out / "states.json").read_text())
     assert report["methods"] == {"door": "pchip", "drawer": "step"}
-    assert report["ranges"]["door"] == {"lo": 0.0, "hi": 1.0, "source": "min-max of key frames"}
+    assert report["ranges"]["door"] == {"lo": 0.0, "hi": 1.0, "source": "key values within [0, 1]: kept as given"}
     assert report["leave_one_out"]["door"]["linear"]["n"] == 1
     # predicting frame 10 from 4 and 20 linearly: 0 + (1 - 4/16... ) -> 6/16 * 0.25 = 0.09375, error 0.90625
     assert report["leave_one_out"]["door"]["linear"]["mae"] == pytest.approx(1 - 0.25 * 6 / 16)
@@ -63,6 +63,22 @@ def test_min_max_and_fixed_ranges_normalise(tmp_path):
     np.testing.assert_allclose(lid, np.linspace(0, 0.5, 11))
     ranges = json.loads((out / "states.json").read_text())["ranges"]
     assert ranges["door"]["lo"] == 10 and ranges["door"]["hi"] == 90 and ranges["lid"]["source"] == "--range"
+
+
+def test_unit_values_are_kept_and_an_object_that_stays_shut_is_named(tmp_path, capsys):
+    # the bedroom capture's wardrobe: shut all along, annotated with noise; min-max read 0.029 as fully open
+    frames = write_frames_csv(tmp_path / "frames.csv", list(range(0, 31)))
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,wardrobe,0\n10,wardrobe,0.029\n20,wardrobe,0.003\n"
+                                             "30,wardrobe,0\n0,drawer,0.1\n10,drawer,0.6\n20,drawer,0.9\n30,drawer,0.2\n")
+    out = tmp_path / "states"
+    args = ["--key-frames", str(keys), "--frames", str(frames), "--out", str(out), "--method", "linear"]
+    assert states_main(args) == 0
+    assert "'wardrobe' barely moves in its key frames (values span 0.029" in capsys.readouterr().err
+    table = pd.read_csv(out / "states.csv")
+    assert table[table.object == "wardrobe"]["value"].max() == pytest.approx(0.029)
+    assert table[table.object == "drawer"]["value"].tolist()[10] == pytest.approx(0.6)  # not stretched to [0, 1]
+    report = json.loads((out / "states.json").read_text())
+    assert report["still"] == ["wardrobe"] and report["key_span"]["drawer"] == pytest.approx(0.8)
 
 
 def test_conerf_annotations_map_minus_one_one_to_unit_range(tmp_path):
