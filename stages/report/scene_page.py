@@ -599,10 +599,14 @@ def section_commands(sd: SceneData) -> str:
                              ""])
                 continue
             states = c.get("states")
-            shown = ", ".join(f"{k} {v:.2f}" for k, v in states.items()) if isinstance(states, dict) else \
-                escape(json.dumps(states))
+            shown = escape(", ".join(f"{k} {v:.2f}" for k, v in states.items()) if isinstance(states, dict) else
+                           json.dumps(states))
+            for name, b in (c.get("beyond_training") or {}).items():  # the control stage's note, as it printed it
+                lo, hi = b["training_range"]
+                shown += (f'<br><span class="note">{escape(name)} at {b["state"]:.2f} is beyond the states its '
+                          f"training frames show ({lo:.2f} to {hi:.2f}): the render extrapolates</span>")
             image = _command_image(m, c["image"]) if c.get("image") else None
-            rows.append([escape(c.get("command", "")), escape(shown), _img(image, c.get("command", ""), 160)])
+            rows.append([escape(c.get("command", "")), shown, _img(image, c.get("command", ""), 160)])
         blocks.append(f"<h3>{escape(m.name)}</h3>" + table(["command", "resulting states", "render"], rows))
     if not blocks:
         first = sd.methods[0].name if sd.methods else "livescene"

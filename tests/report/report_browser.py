@@ -151,6 +151,7 @@ def make_fake_results(root: Path, data: Path, *, methods: tuple[str, ...] = ("li
     _png(control / "command_00.png", np.full((12, 16, 3), 128, dtype=np.uint8))
     (control / "commands.json").write_text(json.dumps({"commands": [
         {"command": "open the object0", "states": {"object0": 1.0, "object1": 0.0},
+         "beyond_training": {"object0": {"state": 1.0, "training_range": [0.01, 0.48]}},
          "image": str(control / "command_00.png")},
         {"command": "open the fridge", "error": "no object named 'fridge'"}]}))
     return res

@@ -86,6 +86,9 @@ def test_page_is_self_contained_and_says_why(tmp_path, tiny_dataset):
     assert ranges["object0"][1] < 0.5
     assert (f"The training frames hold object0 between {ranges['object0'][0]:.2f} and {ranges['object0'][1]:.2f}: "
             "beyond that the renders extrapolate.") in sliders
+    commands = html.split('<section id="commands">')[1].split("</section>")[0]
+    assert ("object0 at 1.00 is beyond the states its training frames show (0.01 to 0.48): the render "
+            "extrapolates") in commands
     assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in html
     assert "<svg" in html and "eval PSNR (dB)" in html  # the error-vs-run-time plot is inline SVG
