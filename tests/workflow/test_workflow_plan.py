@@ -211,6 +211,31 @@ def test_mask_file_reaches_colmap_through_the_labels_stage(workflow_copy, tmp_pa
     assert "--masks results/file/labels/masks " in poses and inputs and "results/file/labels" in inputs.group(1)
 
 
+def test_state_ranges_reach_the_states_stage_and_are_checked(workflow_copy, tmp_path):
+    """Key frames in a unit of the user's get fixed ranges from the sheet (min-max would stretch an object that
+    barely moves to its whole range); the column is refused where no states stage runs, and when malformed."""
+    video, keys, names = tmp_path / "room.mp4", tmp_path / "keys.csv", tmp_path / "mapping.yaml"
+    video.write_bytes(b"")  # a dry run only needs the paths to exist
+    keys.write_text("frame,object,value\n0,wardrobe,0\n")
+    names.write_text("{1: wardrobe, 2: left drawer}")
+    row = {"source": "video", "path": video, "poses": "estimate", "masks": "no", "key_frames": keys, "names": names,
+           "truth": "no", "methods": "livescene"}
+    workflow_copy.write_scenes([{"scene": "filmed", "state_ranges": "wardrobe=0,95;left drawer=0,25", **row},
+                                {"scene": "plain", **row}])
+    plan = workflow_copy.dry_run()
+    assert "--range wardrobe=0,95 --range 'left drawer=0,25'" in plan.scene_jobs("filmed")["states"][0]
+    assert "--range" not in plan.scene_jobs("plain")["states"][0]
+    ready = tmp_path / "ready"
+    ready.mkdir()
+    workflow_copy.write_scenes([{"scene": "ready", "source": "dataset", "path": ready, "poses": "given",
+                                 "state_ranges": "drawer=0,1"},
+                                {"scene": "typo", "state_ranges": "wardrobe=0-95", **row}])
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    assert "line 2 (scene 'ready'): column 'state_ranges': only key frames that the states stage" in run.output
+    assert "line 3 (scene 'typo'): key 'state_ranges'" in run.output
+
+
 def test_only_builds_the_named_scenes(workflow_copy):
     workflow_copy.write_scenes([
         {"scene": "a", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"},

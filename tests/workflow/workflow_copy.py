@@ -13,7 +13,8 @@ from pathlib import Path
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
-COLUMNS = ["scene", "source", "path", "poses", "masks", "key_frames", "names", "prompts", "truth", "methods"]
+COLUMNS = ["scene", "source", "path", "poses", "masks", "key_frames", "names", "prompts", "truth", "methods",
+           "state_ranges"]
 
 
 @dataclass

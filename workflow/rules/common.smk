@@ -178,11 +178,14 @@ def states_input(wildcards):
 
 
 def states_args(wildcards, input):
+    # the sheet's fixed ranges (OBJECT=LO,HI;...), one --range each; quoted: object names may hold spaces
+    ranges = "".join(f" --range {shlex.quote(item.strip())}"
+                     for item in row(wildcards.scene)["state_ranges"].split(";") if item.strip())
     if "capture" in input.keys():
         return (f"--key-frames {Path(input.capture, 'key_frame_value.yaml')}"
-                f" --mapping {Path(input.capture, 'mapping.yaml')}")
+                f" --mapping {Path(input.capture, 'mapping.yaml')}{ranges}")
     names = f" --mapping {input.names}" if "names" in input.keys() else ""
-    return f"--key-frames {input.key_frames}{names}"
+    return f"--key-frames {input.key_frames}{names}{ranges}"
 
 
 def report_scene_input(wildcards):

@@ -102,6 +102,10 @@ def _row_problems(record):
         problems.append(f"column 'key_frames': 'no' trains the dataset's objects ({root / 'mapping.yaml'}) with "
                         "learned states, which its key_frame_value.yaml supervises, and it has none; fix: write 'yes' "
                         "to train on the states its transforms.json gives every frame, or add key_frame_value.yaml")
+    if record.get("state_ranges") and not (frames_assembled(kind, poses) and record.get("key_frames", "yes") != "no"):
+        problems.append("column 'state_ranges': only key frames that the states stage interpolates are normalised "
+                        "(a video, image-folder or synthetic source with key frames and estimated or imported poses); "
+                        "fix: leave it empty for this row")
     truth = record.get("truth", "no")
     if truth == "yes" and kind != "synthetic":
         problems.append(f"column 'truth': 'yes' means a synthetic capture's own truth; for a {kind} source write "
