@@ -316,8 +316,8 @@ class Trainer:
             "device_type": self.device.type,  # whose generator the jitter state is
         }
         path = self.checkpoint_path(self.step)
-        with atomic_path(path, suffix=".pt") as tmp:
-            torch.save(state, tmp)
+        with atomic_path(path, suffix=".pt") as tmp, tmp.open("wb") as fh:
+            torch.save(state, fh)  # a file object: records named "archive/", not after the temporary file
         kept = sorted((self.out / "checkpoints").glob("step_*.pt"))
         for old in kept[: max(len(kept) - max(self.config.train.keep_checkpoints, 1), 0)]:
             old.unlink(missing_ok=True)
@@ -665,8 +665,10 @@ class Trainer:
             "step": self.step,
             "language_encoder": self.language.encoder if self.language else None,
         }
-        with atomic_path(self.out / "model.pt", suffix=".pt") as tmp:
-            torch.save(payload, tmp)
+        # a file object: the archive's records are named "archive/...", not after the temporary file, so identical
+        # runs write identical bytes
+        with atomic_path(self.out / "model.pt", suffix=".pt") as tmp, tmp.open("wb") as fh:
+            torch.save(payload, fh)
         if self.log_gains is not None:
             write_json(self.out / EXPOSURE_FILE, {"spread": self.appearance.get("spread"), "log_gains": self.log_gains})
         run = {

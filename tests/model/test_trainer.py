@@ -75,6 +75,9 @@ def test_a_checkpoint_from_another_device_resumes_with_the_jitter_reseeded(tiny_
         weights.append(_weights(run))
     for k in weights[0]:  # the reseeding is deterministic
         torch.testing.assert_close(weights[0][k], weights[1][k], rtol=0, atol=0, equal_nan=True, msg=k)
+    # model.pt too, byte for byte: nothing in it names the run's folder or its temporary file (checkpoints hold
+    # the wall time)
+    assert (tmp_path / "a" / "model.pt").read_bytes() == (tmp_path / "b" / "model.pt").read_bytes()
 
 
 def test_run_files_log_columns_and_run_json(trained_run):
