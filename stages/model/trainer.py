@@ -168,6 +168,13 @@ def psnr_of(mse: float) -> float:
     return -10.0 * math.log10(max(mse, 1e-12))
 
 
+def save_atomically(obj: Any, path: Path) -> None:
+    """``torch.save`` through a temporary file renamed onto ``path``. Saved to a file object, the archive's records
+    are named "archive/..." rather than after the temporary file, so identical runs write identical bytes."""
+    with atomic_path(path, suffix=".pt") as tmp, tmp.open("wb") as fh:
+        torch.save(obj, fh)
+
+
 class Trainer:
     """Trains one method on one scene dataset into a run folder."""
 
@@ -316,8 +323,7 @@ class Trainer:
             "device_type": self.device.type,  # whose generator the jitter state is
         }
         path = self.checkpoint_path(self.step)
-        with atomic_path(path, suffix=".pt") as tmp, tmp.open("wb") as fh:
-            torch.save(state, fh)  # a file object: records named "archive/", not after the temporary file
+        save_atomically(state, path)
         kept = sorted((self.out / "checkpoints").glob("step_*.pt"))
         for old in kept[: max(len(kept) - max(self.config.train.keep_checkpoints, 1), 0)]:
             old.unlink(missing_ok=True)
@@ -665,10 +671,7 @@ class Trainer:
             "step": self.step,
             "language_encoder": self.language.encoder if self.language else None,
         }
-        # a file object: the archive's records are named "archive/...", not after the temporary file, so identical
-        # runs write identical bytes
-        with atomic_path(self.out / "model.pt", suffix=".pt") as tmp, tmp.open("wb") as fh:
-            torch.save(payload, fh)
+        save_atomically(payload, self.out / "model.pt")
         if self.log_gains is not None:
             write_json(self.out / EXPOSURE_FILE, {"spread": self.appearance.get("spread"), "log_gains": self.log_gains})
         run = {
