@@ -2,10 +2,12 @@
 
     livescene control --run RUN "open the fridge and half open the drawer" [--out control.png]
     livescene control --data DS "close everything"                     # parse only, no trained run
+    livescene control --data DS --from-frame --frame FID "close everything except the drawer"
     livescene control --objects fridge,drawer --prompts prompts.yaml "open the refrigerator"
 
 Prints the new state vector as JSON. With --run the result is rendered at a
-dataset frame's pose (default: the first test frame) through the model API.
+dataset frame's pose (default: the first test frame) through the model API;
+--from-frame starts from that frame's states (with --run or --data).
 """
 
 from __future__ import annotations
@@ -101,7 +103,9 @@ def _control(args: argparse.Namespace) -> int:
     parser = CommandParser(vocabulary, encoder)
 
     ds = frame = None
-    if args.run:
+    if data is not None:
+        # also without a run: --from-frame starts from a frame's states, and commands beyond the training states
+        # are named
         from stages.scene import read_scene
 
         ds = read_scene(data)
@@ -110,6 +114,9 @@ def _control(args: argparse.Namespace) -> int:
         if frame is None:
             raise InputError(Path(data) / "transforms.json", f"no frame with id {args.frame!r}",
                              "pick a frame id of the dataset")
+    elif args.from_frame or args.frame:
+        raise InputError("--from-frame/--frame", "a frame needs a scene dataset, and none was given",
+                         "pass --data DS or --run RUN instead of --objects, or the starting states with --state")
     current = dict.fromkeys(vocabulary.objects, 0.0)
     if args.from_frame and frame is not None and frame.state:
         current.update({k: v for k, v in frame.state.items() if k in current})

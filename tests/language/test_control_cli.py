@@ -132,3 +132,21 @@ def test_a_run_whose_dataset_moved_or_is_unnamed_is_refused_with_the_fix(tmp_pat
         capsys.readouterr().err
     assert call(tmp_path / "no-run") == 2
     assert "no-run: run folder not found; fix: train one with `livescene train" in capsys.readouterr().err
+
+
+def test_control_starts_from_a_frames_states_without_a_run(tiny_dataset, capsys):
+    # parse only (no run): --from-frame --frame takes that frame's states, which "except" then keeps
+    frame = tiny_dataset.frames[1]
+    assert frame.state and any(v > 0 for v in frame.state.values())
+    kept = max(frame.state, key=frame.state.get)
+    code = control_cli.main(["--data", str(tiny_dataset.root), "--no-encoder", "--from-frame", "--frame",
+                             frame.frame_id, f"close everything except {kept}"])
+    assert code == 0
+    states = json.loads(capsys.readouterr().out)["states"]
+    assert states[kept] == pytest.approx(frame.state[kept]) and states[kept] > 0
+    assert all(v == 0.0 for name, v in states.items() if name != kept)
+
+
+def test_control_refuses_a_frame_without_a_dataset(capsys):
+    assert control_cli.main(["--objects", "fridge,drawer", "--no-encoder", "--from-frame", "open all"]) == 2
+    assert "a frame needs a scene dataset" in capsys.readouterr().err
