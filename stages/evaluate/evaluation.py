@@ -29,7 +29,7 @@ from .metrics import SSIM_FORM, Lpips, iou, psnr, ssim, summarize
 from .truth_source import TruthSource
 from .unseen_states import OBSERVED_WITHIN, observed_levels, unseen_combinations
 
-EVALUATE_VERSION = 6
+EVALUATE_VERSION = 7
 """2: timings moved to timings.json; non-novel combinations recorded, not rendered; grounding frames.
 3: held-out PSNR also over object pixels and over static pixels (``psnr_objects``, ``psnr_static``).
 4: the unseen-combination and locality tests say how many poses they used and asked for, and whether the render
@@ -38,7 +38,9 @@ fewer frames than asked also gives fewer poses, not cut).
 5: held-out mean accumulation over object pixels and over static pixels (``accumulation_objects``,
 ``accumulation_static``): the report's trust check on objects painted behind themselves.
 6: unseen combinations take each object only at levels the training showed it at (``observed_within``);
-``training_range`` and ``levels_not_observed`` say what was left out."""
+``training_range`` and ``levels_not_observed`` say what was left out.
+7: a grounding query that is an object's name or synonym takes that object's probability alone (weight 1); the
+softmax over the objects' phrases weighs only other queries (``Grounder.object_weights``)."""
 
 
 @dataclass

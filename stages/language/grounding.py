@@ -2,12 +2,16 @@
 
 Two sources of evidence, after docs/method.md section 7:
 
-- ``probs`` (every run): the query is scored against each object's phrases
-  (name, synonyms, description, state phrases); a softmax over objects with
-  temperature 10 gives weights ``w``; the map is ``sum_i w_i p_i(pixel)`` with
-  ``p`` the model's rendered per-object interaction probability. When the
-  query clearly names one object this is that object's probability, as in the
-  reference, and otherwise it spreads over the plausible objects.
+- ``probs`` (every run): a query that names one object in words (its name or a
+  synonym, also inside a longer phrase: "the fridge door") selects that object
+  (weight 1, as ``livescene control`` resolves it); any other query
+  is scored against each object's phrases (name, synonyms, description, state
+  phrases) and a softmax over objects with temperature 10 gives the weights
+  ``w``. The map is ``sum_i w_i p_i(pixel)`` with ``p`` the model's rendered
+  per-object interaction probability: for a name, that object's probability, as
+  in the reference; otherwise it spreads over the plausible objects. (By the
+  softmax alone, "top drawer" among a middle and a bottom drawer weighs only
+  0.56, and the map scores how alike the names are, not the model.)
 - ``language`` (runs trained with language targets): LERF relevancy of the
   rendered embedding of each pixel against the query, with the canonical
   negatives "object", "things", "stuff", "texture" and temperature 10. This is
@@ -25,11 +29,14 @@ from __future__ import annotations
 import numpy as np
 
 from .encoder import TextEncoder
+from .object_resolution import CommandError, ObjectResolver
 from .relevancy import CANONICAL_NEGATIVES, TEMPERATURE, lerf_relevancy, object_similarities, softmax
 from .targets import BACKGROUND_PHRASE
 from .vocabulary import ObjectVocabulary, normalize_phrase
 
 DEFAULT_THRESHOLD = 0.5
+NAMING_METHODS = ("exact", "partial")
+"""Resolutions by which a query names its object in words; misspellings and meanings are weighed by the softmax."""
 
 
 class Grounder:
@@ -39,6 +46,7 @@ class Grounder:
         self.vocabulary = vocabulary
         self.encoder = encoder
         self.temperature = temperature
+        self._resolver = ObjectResolver(vocabulary)  # words only: no encoder
         self._object_vectors = [encoder.encode(self.object_phrases(i)) for i in range(len(vocabulary.entries))]
         self._negatives = encoder.encode(list(CANONICAL_NEGATIVES))
         self._table_vectors: list[np.ndarray] | None = None
@@ -60,7 +68,15 @@ class Grounder:
         return [p for p in dict.fromkeys(phrases) if p]
 
     def object_weights(self, query: str) -> np.ndarray:
-        """``[alpha]`` softmax over objects (temperature 10) of the query's best cosine to each object's phrases."""
+        """``[alpha]``: one-hot for a query that names one object in words (its name or a synonym, or one found in
+        the query: ``ObjectResolver``'s exact and partial matches), else the softmax over objects (temperature 10)
+        of the query's best cosine to each object's phrases."""
+        try:
+            named = self._resolver.resolve(query)
+        except CommandError:  # no name in it, or several: the phrases' meaning decides
+            named = None
+        if named is not None and named.method in NAMING_METHODS:
+            return (np.array(self.vocabulary.objects) == named.object).astype(np.float64)
         q = self.encoder.encode([query])[0]
         return softmax(object_similarities(q, self._object_vectors), self.temperature)
 

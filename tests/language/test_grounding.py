@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.language import Grounder
+from stages.language import Grounder, ObjectVocabulary
 
 
 def _probs(h: int = 6, w: int = 9, n: int = 4) -> tuple[np.ndarray, np.ndarray]:
@@ -50,3 +50,20 @@ def test_language_decoded_into_objects_separates_related_objects(kitchen, encode
     rel = grounder.relevancy_from_language_objects(lang, "kitchen drawer")
     assert rel[0].min() > 0.5 > rel[1].max()
     assert grounder.relevancy_from_language_objects(lang, "refrigerator").max() < 0.5
+
+
+def test_a_name_selects_its_object_even_among_similar_names(encoder):
+    # three drawers whose names differ by one word: by the softmax alone "top drawer" weighs ~0.6, so a pixel the
+    # model is sure of would score ~0.6 and its neighbours' pixels ~0.2; a name selects its object alone
+    vocabulary = ObjectVocabulary.from_prompts(
+        ["top drawer", "middle drawer", "bottom drawer"],
+        {"top drawer": {"synonyms": ["upper file drawer"]}}, "prompts.yaml")
+    grounder = Grounder(vocabulary, encoder)
+    for query, index in [("top drawer", 0), ("The Top-Drawer", 0), ("upper file drawer", 0), ("bottom drawer", 2)]:
+        np.testing.assert_array_equal(grounder.object_weights(query), np.eye(3)[index])
+    soft = grounder.object_weights("drawer")  # in every name: no object is named, the weights spread
+    assert soft.max() < 0.9 and abs(soft.sum() - 1) < 1e-9
+    probs = np.zeros((1, 3, 4))
+    probs[0, :, :3] = np.eye(3) * 0.8
+    probs[0, :, 3] = 0.2
+    np.testing.assert_allclose(grounder.relevancy_from_probs(probs, "middle drawer"), [[0.0, 0.8, 0.0]])
