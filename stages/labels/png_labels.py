@@ -1,4 +1,9 @@
-"""PNG id maps: one image per frame, pixel value 0 = background, k = the object whose id is k in the name table."""
+"""PNG id maps: one image per frame, pixel value 0 = background, k = the object whose id is k in the name table.
+
+A palette PNG (mode "P": DAVIS's format, what video object segmenters such as XMem, Cutie and SAM 2's video
+predictor write) holds the id as the palette index; OpenCV would decode it into the palette's colours, so it is
+read through Pillow, which keeps the indices.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from PIL import Image
 
 from stages.scene import frame_id_of
 
@@ -33,13 +39,15 @@ def read_png_labels(folder: Path, table: NameTable) -> LabelSet:
 
 def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
     def load() -> LabelMap:
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        img = _palette_indices(path)
+        if img is None:
+            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if img is None:
             raise LabelError(path, "image missing or unreadable", "re-export the id map as PNG")
         if img.ndim == 3:
             if not all(np.array_equal(img[..., 0], img[..., c]) for c in range(1, img.shape[2])):
-                raise LabelError(path, "id map has colour channels that differ",
-                                 "save a single-channel (grey) PNG whose values are the object ids")
+                raise LabelError(path, "id map has colour channels that differ (an RGB image, not ids)",
+                                 "save a single-channel (grey) or palette PNG whose values are the object ids")
             img = img[..., 0]
         values = np.unique(img)
         unknown = [int(v) for v in values if not known[int(v)]]
@@ -49,3 +57,12 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
         return LabelMap(lut[img].astype(np.uint16))
 
     return load
+
+
+def _palette_indices(path: Path) -> np.ndarray | None:
+    """The palette indices [H, W] of a palette PNG; None for any other image (read by OpenCV)."""
+    try:
+        with Image.open(path) as image:
+            return np.asarray(image) if image.mode == "P" else None
+    except (OSError, ValueError):  # unreadable: OpenCV's read names the problem
+        return None

@@ -125,3 +125,51 @@ def test_npy_overlaps_go_to_the_later_object_and_empty_pixels_to_background(labe
     assert out[0, 0].tolist() == [False, False, True, False]
     assert out[0, 1].tolist() == [False, False, False, True]
     assert summary["overlap_pixels"] == {"00000": 1}
+
+
+def _davis_palette() -> list[int]:
+    """DAVIS's colour map (what XMem, Cutie and SAM 2's video demos save): index 1 dark red, 2 dark green, ..."""
+    palette = []
+    for index in range(256):
+        rgb, c = [0, 0, 0], index
+        for shift in range(7, -1, -1):
+            for channel in range(3):
+                rgb[channel] |= ((c >> channel) & 1) << shift
+            c >>= 3
+        palette += rgb
+    return palette
+
+
+def test_palette_pngs_are_read_by_their_indices(label_files):
+    from PIL import Image
+
+    grey = write_png(label_files.root, label_files.labels)
+    palette = label_files.root / "palette"
+    (palette / "masks").mkdir(parents=True)
+    for path in sorted((grey / "masks").glob("*.png")):
+        image = Image.fromarray(np.asarray(Image.open(path)), mode="P")
+        image.putpalette(_davis_palette())
+        image.save(palette / "masks" / path.name)
+    (palette / "mapping.yaml").write_text((grey / "mapping.yaml").read_text())
+    assert Image.open(next((palette / "masks").glob("*.png"))).mode == "P"
+    ingest(grey, label_files.frames, label_files.root / "out_grey", missing_masks="leave")
+    summary = ingest(palette, label_files.frames, label_files.root / "out_palette", missing_masks="leave")
+    assert summary["format"] == "png" and summary["objects"] == list(NAMES)
+    grey_masks, palette_masks = read_masks(label_files.root / "out_grey"), read_masks(label_files.root / "out_palette")
+    assert sorted(palette_masks) == sorted(grey_masks) == ["00000", "00002", "00004"]
+    for fid in grey_masks:
+        np.testing.assert_array_equal(palette_masks[fid], grey_masks[fid])
+
+
+def test_a_colour_mask_that_is_not_a_palette_is_refused_with_the_fix(label_files, capsys):
+    import cv2
+
+    src = write_png(label_files.root, label_files.labels)
+    for path in (src / "masks").glob("*.png"):  # the palette's colours written out as RGB: no ids left
+        ids = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(path), np.stack([ids, ids // 2, np.zeros_like(ids)], axis=-1))
+    assert labels_main(["--input", str(src), "--frames", str(label_files.frames), "--out",
+                        str(label_files.root / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "id map has colour channels that differ" in err and "palette PNG whose values are the object ids" in err
+    assert not (label_files.root / "out").exists()
