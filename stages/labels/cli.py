@@ -13,9 +13,10 @@ from .ingest import LabelsConfig, ingest_labels
 def build_parser(prog: str = "livescene labels") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=__doc__)
     p.add_argument("--input", required=True, type=Path,
-                   help="mask folder (masks/<fid>.npy, <name>_<fid>.png, LabelMe <fid>.json), a folder holding "
-                        "masks/, or a COCO / LabelMe .json file")
-    p.add_argument("--format", default="auto", choices=["auto", "npy", "png", "coco", "labelme"])
+                   help="mask folder (masks/<fid>.npy, <name>_<fid>.png id maps, grey or palette, LabelMe <fid>.json, "
+                        "or one folder of binary PNGs per object), a folder holding masks/, or a COCO / LabelMe .json "
+                        "file")
+    p.add_argument("--format", default="auto", choices=["auto", "npy", "png", "coco", "labelme", "objects"])
     p.add_argument("--mapping", type=Path, default=None,
                    help="name table {id: name}: LiveScene mapping.yaml or CoNeRF mapping.yml "
                         "(default: found next to the input; COCO may use its categories instead)")

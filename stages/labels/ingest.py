@@ -35,11 +35,12 @@ from .label_set import LabelSet
 from .labelme_labels import is_labelme, read_labelme_labels
 from .name_table import NameTable, find_name_table, read_name_table
 from .npy_labels import read_npy_labels
+from .object_folder_labels import object_folders, read_object_folder_labels
 from .png_labels import read_png_labels
 from .propagate_masks import propagate_missing
 from .resize import resize_labels
 
-LabelFormat = Literal["auto", "npy", "png", "coco", "labelme"]
+LabelFormat = Literal["auto", "npy", "png", "coco", "labelme", "objects"]
 MissingMasks = Literal["propagate", "leave", "refuse"]
 
 
@@ -82,9 +83,12 @@ def detect_format(path: Path) -> tuple[str, Path]:
     folder = path / "masks" if (path / "masks").is_dir() and _has_labels(path / "masks") else path
     counts = {ext: len(list(folder.glob(f"*.{ext}"))) for ext in ("npy", "png", "json")}
     present = [ext for ext, n in counts.items() if n]
+    if not present and object_folders(folder):
+        return "objects", folder
     if len(present) != 1:
         what = "no .npy, .png or .json masks" if not present else f"a mix of {', '.join(present)} files"
-        raise LabelError(folder, f"cannot tell the label format: {what}", "pass --format npy|png|coco|labelme")
+        raise LabelError(folder, f"cannot tell the label format: {what}",
+                         "pass --format npy|png|coco|labelme|objects")
     ext = present[0]
     if ext == "json":
         jsons = sorted(folder.glob("*.json"))
@@ -95,7 +99,8 @@ def detect_format(path: Path) -> tuple[str, Path]:
 
 
 def _has_labels(folder: Path) -> bool:
-    return any(folder.glob("*.npy")) or any(folder.glob("*.png")) or any(folder.glob("*.json"))
+    return (any(folder.glob("*.npy")) or any(folder.glob("*.png")) or any(folder.glob("*.json"))
+            or bool(object_folders(folder)))
 
 
 def _peek_json(path: Path) -> object:
@@ -125,12 +130,14 @@ def open_label_set(config: LabelsConfig) -> LabelSet:
         return read_npy_labels(where, table) if fmt == "npy" else read_png_labels(where, table)
     if fmt == "coco":
         return read_coco_labels(where, table)
+    if fmt == "objects":
+        return read_object_folder_labels(where, table)
     if fmt == "labelme":
         files = [where] if where.is_file() else sorted(where.glob("*.json"))
         if not files:
             raise LabelError(where, "no LabelMe .json files", "save the annotations with LabelMe into this folder")
         return read_labelme_labels(files, table)
-    raise LabelError(config.input, f"unknown format {fmt!r}", "use auto, npy, png, coco or labelme")
+    raise LabelError(config.input, f"unknown format {fmt!r}", "use auto, npy, png, coco, labelme or objects")
 
 
 def ingest_labels(config: LabelsConfig) -> dict:

@@ -39,7 +39,7 @@ def read_png_labels(folder: Path, table: NameTable) -> LabelSet:
 
 def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
     def load() -> LabelMap:
-        img = _palette_indices(path)
+        img = palette_indices(path)
         if img is None:
             img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if img is None:
@@ -59,7 +59,7 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
     return load
 
 
-def _palette_indices(path: Path) -> np.ndarray | None:
+def palette_indices(path: Path) -> np.ndarray | None:
     """The palette indices [H, W] of a palette PNG; None for any other image (read by OpenCV)."""
     try:
         with Image.open(path) as image:

@@ -173,3 +173,52 @@ def test_a_colour_mask_that_is_not_a_palette_is_refused_with_the_fix(label_files
     err = capsys.readouterr().err
     assert "id map has colour channels that differ" in err and "palette PNG whose values are the object ids" in err
     assert not (label_files.root / "out").exists()
+
+
+def _write_object_folders(root: Path, labels: dict[str, np.ndarray], names=NAMES, colour: bool = False) -> Path:
+    """One folder of binary masks per object (white on black; 3-channel with ``colour``), named after it."""
+    import cv2
+
+    out = root / "objects"
+    for k, name in enumerate(names, start=1):
+        (out / name).mkdir(parents=True)
+        for fid, lab in labels.items():
+            mask = np.where(lab == k, 255, 0).astype(np.uint8)
+            cv2.imwrite(str(out / name / f"{fid}.png"), np.dstack([mask] * 3) if colour else mask)
+    return out
+
+
+def test_one_mask_folder_per_object_gives_the_same_masks(label_files):
+    grey = write_png(label_files.root, label_files.labels)
+    ingest(grey, label_files.frames, label_files.root / "out_grey", missing_masks="leave")
+    reference = read_masks(label_files.root / "out_grey")
+    src = _write_object_folders(label_files.root, label_files.labels, colour=True)
+    summary = ingest(src, label_files.frames, label_files.root / "out_objects", missing_masks="leave")
+    assert summary["format"] == "objects" and summary["objects"] == sorted(NAMES)  # sorted folder names
+    masks = read_masks(label_files.root / "out_objects")
+    assert sorted(masks) == sorted(reference)
+    for fid in reference:
+        np.testing.assert_array_equal(masks[fid], reference[fid])  # NAMES are already sorted: same channels
+
+    # a mapping.yaml beside the folders sets the order; its names must be the folders'
+    (src / "mapping.yaml").write_text(yaml.safe_dump({1: "fridge", 2: "door", 3: "drawer"}))
+    summary = ingest(src, label_files.frames, label_files.root / "out_ordered", missing_masks="leave")
+    assert summary["objects"] == ["fridge", "door", "drawer"]
+    ordered = read_masks(label_files.root / "out_ordered")
+    np.testing.assert_array_equal(ordered["00000"][..., [1, 2, 0, 3]], reference["00000"])
+
+
+def test_object_folders_refuse_a_frame_some_objects_lack_and_names_the_table_lacks(label_files, capsys):
+    src = _write_object_folders(label_files.root, label_files.labels)
+    (src / "drawer" / "00002.png").unlink()
+    out = label_files.root / "out"
+    args = ["--input", str(src), "--frames", str(label_files.frames), "--out", str(out), "--no-progress"]
+    assert labels_main(args) == 2
+    err = capsys.readouterr().err
+    assert "1 frames have masks for some objects only (frame 00002 has none for ['drawer'])" in err
+    assert "an empty mask where it is not visible" in err and not out.exists()
+    (src / "drawer").rename(src / "chest")
+    (src / "mapping.yaml").write_text(yaml.safe_dump({1: "door", 2: "drawer", 3: "fridge"}))
+    assert labels_main(args) == 2
+    err = capsys.readouterr().err
+    assert "folders without a name: ['chest']; names without a folder: ['drawer']" in err and not out.exists()
