@@ -193,22 +193,34 @@ def test_imported_colmap_model_replaces_sfm_and_prompts_reach_assembly(workflow_
 
 
 def test_mask_file_reaches_colmap_through_the_labels_stage(workflow_copy, tmp_path):
-    """A mask folder goes to COLMAP as it is; a COCO / LabelMe file goes through the labels stage's id maps."""
+    """A folder of id maps goes to COLMAP as it is (also as a masks/ subfolder); a COCO / LabelMe file, and one
+    folder of masks per object, go through the labels stage's id maps."""
     video, folder, coco = tmp_path / "room.mp4", tmp_path / "masks", tmp_path / "masks.json"
     video.write_bytes(b"")  # a dry run only needs the paths to exist
     folder.mkdir()
+    (folder / "frame_00000.png").write_bytes(b"")
     coco.write_text("{}")
+    nested, per_object = tmp_path / "annotations", tmp_path / "per_object"
+    (nested / "masks").mkdir(parents=True)
+    (nested / "masks" / "frame_00000.png").write_bytes(b"")
+    (per_object / "fridge").mkdir(parents=True)
+    (per_object / "fridge" / "frame_00000.png").write_bytes(b"")
     names, keys = tmp_path / "mapping.yaml", tmp_path / "keys.yaml"
     names.write_text("{1: fridge}")
     keys.write_text("{frame_00000: {fridge: 0.0}}")
     row = {"source": "video", "path": video, "poses": "estimate", "key_frames": keys, "names": names,
            "truth": "no", "methods": "livescene"}
-    workflow_copy.write_scenes([{"scene": "folder", "masks": folder, **row}, {"scene": "file", "masks": coco, **row}])
+    workflow_copy.write_scenes([{"scene": "folder", "masks": folder, **row}, {"scene": "file", "masks": coco, **row},
+                                {"scene": "nested", "masks": nested, **row},
+                                {"scene": "objects", "masks": per_object, **row}])
     plan = workflow_copy.dry_run()
     assert f"--masks {folder} " in plan.scene_jobs("folder")["poses"][0]
-    poses = plan.scene_jobs("file")["poses"][0]
-    inputs = re.search(r"^\s*input: (.*)$", poses, re.M)
-    assert "--masks results/file/labels/masks " in poses and inputs and "results/file/labels" in inputs.group(1)
+    assert f"--masks {nested / 'masks'} " in plan.scene_jobs("nested")["poses"][0]
+    for scene in ("file", "objects"):
+        poses = plan.scene_jobs(scene)["poses"][0]
+        inputs = re.search(r"^\s*input: (.*)$", poses, re.M)
+        assert f"--masks results/{scene}/labels/masks " in poses and inputs
+        assert f"results/{scene}/labels" in inputs.group(1)
 
 
 def test_state_ranges_reach_the_states_stage_and_are_checked(workflow_copy, tmp_path):

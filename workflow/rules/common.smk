@@ -123,12 +123,24 @@ def poses_input(wildcards):
     files = {"frames": R(scene, "frames")}
     if source(scene) == "synthetic":
         files["capture"] = capture_dir(scene)
-    elif carries(scene, "masks") and Path(row(scene)["masks"]).is_dir():
-        files["masks"] = row(scene)["masks"]
-    elif carries(scene, "masks") and Path(row(scene)["masks"]).is_file():
-        # a COCO / LabelMe file: COLMAP reads the labels stage's id maps of it (docs/poses.md)
+    elif carries(scene, "masks") and (maps := id_map_folder(row(scene)["masks"])) is not None:
+        files["masks"] = str(maps)
+    elif carries(scene, "masks"):
+        # a COCO / LabelMe file or folder, or one folder of masks per object: COLMAP reads the labels stage's id
+        # maps of it (docs/poses.md)
         files["labels"] = R(scene, "labels")
     return files
+
+
+def id_map_folder(path):
+    """The folder of per-frame id maps (PNG) or .npy masks that COLMAP reads as it is: ``path`` or its masks/
+    subfolder, as the labels stage looks; None for anything else."""
+    path = Path(path)
+    folder = path / "masks" if (path / "masks").is_dir() else path
+    if not folder.is_dir():
+        return None
+    has_maps = any(p.suffix.lower() in (".png", ".npy") and p.is_file() for p in folder.iterdir())
+    return folder if has_maps else None
 
 
 def poses_masks(wildcards, input):
