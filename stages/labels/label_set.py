@@ -41,7 +41,7 @@ class LabelSet:
     """All labelled frames of one source and the names of its objects."""
 
     format: str
-    """npy, png, coco or labelme."""
+    """npy, png, coco, labelme or objects (one folder per object)."""
     names: tuple[str, ...]
     """Object names in canonical order."""
     names_from: str
