@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from stages.scene import frame_id_of
@@ -20,7 +19,7 @@ from stages.scene import frame_id_of
 from .errors import LabelError
 from .label_set import LabelEntry, LabelMap, LabelSet, paint
 from .name_table import NameTable
-from .png_labels import palette_indices
+from .png_labels import read_mask_image
 
 
 def object_folders(folder: Path) -> list[Path]:
@@ -62,11 +61,7 @@ def _loader(paths: list[Path]):
         canvas: np.ndarray | None = None
         overlap = 0
         for index, path in enumerate(paths, start=1):
-            mask = palette_indices(path)
-            if mask is None:
-                mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-            if mask is None:
-                raise LabelError(path, "mask missing or unreadable", "re-export the mask as PNG")
+            mask = read_mask_image(path)
             region = (mask != 0).any(axis=-1) if mask.ndim == 3 else mask != 0
             if canvas is None:
                 canvas = np.zeros(region.shape, np.uint16)

@@ -39,11 +39,7 @@ def read_png_labels(folder: Path, table: NameTable) -> LabelSet:
 
 def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
     def load() -> LabelMap:
-        img = palette_indices(path)
-        if img is None:
-            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise LabelError(path, "image missing or unreadable", "re-export the id map as PNG")
+        img = read_mask_image(path)
         if img.ndim == 3:
             if not all(np.array_equal(img[..., 0], img[..., c]) for c in range(1, img.shape[2])):
                 raise LabelError(path, "id map has colour channels that differ (an RGB image, not ids)",
@@ -59,10 +55,19 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
     return load
 
 
-def palette_indices(path: Path) -> np.ndarray | None:
-    """The palette indices [H, W] of a palette PNG; None for any other image (read by OpenCV)."""
+def read_mask_image(path: Path) -> np.ndarray:
+    """A mask PNG as stored: a palette PNG's indices [H, W] (Pillow), any other image as OpenCV reads it unchanged."""
+    indices = _palette_indices(path)
+    img = indices if indices is not None else cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise LabelError(path, "image missing or unreadable", "re-export the mask as PNG")
+    return img
+
+
+def _palette_indices(path: Path) -> np.ndarray | None:
+    """The palette indices [H, W] of a palette PNG; None for any other image."""
     try:
         with Image.open(path) as image:
             return np.asarray(image) if image.mode == "P" else None
-    except (OSError, ValueError):  # unreadable: OpenCV's read names the problem
+    except (OSError, ValueError):  # unreadable: OpenCV's read then names the problem
         return None
