@@ -51,6 +51,8 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
     i.add_argument("--summaries", nargs="+", required=True, help="summary.json of each scene")
     i.add_argument("--pending", default="", help="comma-separated scenes of the sheet without a page yet")
     i.add_argument("--out", required=True, help="index HTML to write")
+    i.add_argument("--csv", default="", help="also write every scene's paired verdicts here (one row per scene, "
+                   "baseline and metric)")
     return parser
 
 
@@ -104,8 +106,13 @@ def _link(target: Path, start: Path) -> str:
 def _index(args: argparse.Namespace) -> int:
     from stages.scene.atomic_io import write_text
 
-    from .index_page import build_index
+    from .index_page import build_index, load_summaries
+    from .verdict_table import verdict_rows, verdicts_csv
 
-    write_text(Path(args.out), build_index(args.summaries, pending=[s for s in args.pending.split(',') if s]))
+    summaries = load_summaries(args.summaries)
+    write_text(Path(args.out), build_index(summaries, pending=[s for s in args.pending.split(',') if s]))
     print(args.out)
+    if args.csv:
+        write_text(Path(args.csv), verdicts_csv(verdict_rows(summaries)))
+        print(args.csv)
     return 0

@@ -1,4 +1,5 @@
-"""The index page: one row per scene with its headline numbers and a link to its page."""
+"""The index page: one row per scene with its headline numbers and a link to its page, then the paired
+verdicts of every scene in one matrix (``verdict_table.py``)."""
 
 from __future__ import annotations
 
@@ -9,18 +10,26 @@ from pathlib import Path
 from stages.scene import InputError
 
 from .html_parts import fmt, page, table
+from .verdict_table import verdict_matrix_html, verdict_rows
 
 
-def build_index(summary_files: list[str | Path], pending: list[str] | None = None) -> str:
-    """HTML of the index page from the scenes' summary.json files (each links its page by its "page"); ``pending``
-    names the sheet's scenes that have no page yet (a run restricted with ``--config only=...``)."""
-    rows = []
+def load_summaries(summary_files: list[str | Path]) -> list[dict]:
+    """The scenes' summary.json files (``scene_page.scene_summary``), in the order given."""
+    out = []
     for path in summary_files:
         path = Path(path)
         try:
-            s = json.loads(path.read_text())
+            out.append(json.loads(path.read_text()))
         except (OSError, json.JSONDecodeError) as exc:
             raise InputError(path, f"unreadable scene summary ({exc})", "re-run the scene's report rule") from exc
+    return out
+
+
+def build_index(summaries: list[dict], pending: list[str] | None = None) -> str:
+    """HTML of the index page from the scenes' summaries (each links its page by its "page"); ``pending``
+    names the sheet's scenes that have no page yet (a run restricted with ``--config only=...``)."""
+    rows = []
+    for s in summaries:
         methods = "<br>".join(f"{escape(name)}: PSNR {fmt(v.get('psnr'), 2)} dB, SSIM {fmt(v.get('ssim'), 3)}, "
                               f"{fmt(v.get('train_seconds'), 0)} s training" + _flag(v.get("trust"))
                               for name, v in s["methods"].items())
@@ -36,7 +45,8 @@ def build_index(summary_files: list[str | Path], pending: list[str] | None = Non
     body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline. A flagged run "
             "(&#9888;) is under its trust floors: its numbers are not results.</p>"
             + table(["scene", "objects", "frames", "poses registered", "methods (held-out)",
-                     "LiveScene vs baselines (paired, 95% CI)", "rules skipped", "job seconds"], rows) + waiting)
+                     "LiveScene vs baselines (paired, 95% CI)", "rules skipped", "job seconds"], rows) + waiting
+            + "<h2>Verdicts across scenes</h2>" + verdict_matrix_html(verdict_rows(summaries)))
     return page("LiveScene reports", body)
 
 

@@ -11,7 +11,7 @@ from report_browser import make_fake_results
 from test_report_page import build_page
 
 from stages.model.config import TrustConfig
-from stages.report.index_page import build_index
+from stages.report.index_page import build_index, load_summaries
 from stages.report.paired import compare, grounding_items, held_out_items, paired_difference, unseen_items, verdict
 from stages.report.scene_data import train_curve_by_step
 from stages.report.trust import assess_run, trust_floors
@@ -223,7 +223,7 @@ def test_page_and_summary_carry_the_verdict_and_the_flags(tmp_path, tiny_dataset
     assert methods_html.index("&#9888; undertrained") < methods_html.index("21.000")  # the flag sits by the numbers
     assert "2.500" in methods_html and "3.500" in methods_html  # render fps read from timings.json
 
-    index = build_index([tmp_path / "summary.json"])
+    index = build_index(load_summaries([tmp_path / "summary.json"]))
     assert "conerf: PSNR 21.00 dB" in index and "&#9888; undertrained" in index
     assert "vs conerf, held_out_psnr: LiveScene behind" in index and "rests on flagged conerf" in index
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from stages.report.verdict_table import COLUMNS
+
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "workflow"
 USER_COMMANDS = ["close everything", "open the cupboard"]  # a synonym from prompts.yaml
 
@@ -69,6 +71,9 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     _check_user_capture(wf)
     index = (wf.root / "reports" / "index.html").read_text()
     assert 'href="scenes/tiny.html"' in index and 'href="scenes/filmed.html"' in index
+    # LiveScene alone in both scenes: no paired verdict, said so, and verdicts.csv holds its header only
+    assert "No scene has a paired verdict" in index
+    assert (wf.root / "reports" / "verdicts.csv").read_text().splitlines() == [",".join(COLUMNS)]
     for page in ("scenes/tiny.html", "index.html", "scenes/filmed.html"):  # the last one is kept as a picture
         chromium.load((wf.root / "reports" / page).as_uri())
         images = chromium.evaluate("Array.from(document.images).map(i => [i.alt, i.complete && i.naturalWidth > 0])")
@@ -92,6 +97,7 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     assert report.code == 0, report.output[-3000:]
     names = zipfile.ZipFile(wf.root / "report.zip").namelist()
     assert any(n.endswith("tiny.html") for n in names) and any(n.endswith("pose_error.json") for n in names)
+    assert any(n.endswith("verdicts.csv") for n in names)
 
 
 def _check_user_capture(wf):

@@ -192,8 +192,8 @@ def scene_outputs(scene):
 
 
 def all_targets():
-    """Final outputs: the index page (which pulls in every scene page and all it needs)."""
-    return [str(Path(REPORTS, "index.html"))]
+    """Final outputs: the index page (which pulls in every scene page and all it needs) and its verdicts.csv."""
+    return [str(Path(REPORTS, "index.html")), str(Path(REPORTS, "verdicts.csv"))]
 
 
 def earlier_summaries(scene=None):

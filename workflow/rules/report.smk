@@ -71,11 +71,17 @@ rule report_index:
         summaries=expand(R("{scene}", "report", "summary.json"), scene=SELECTED),
         pages=expand(str(Path(REPORTS, "scenes", "{scene}.html")), scene=SELECTED),
     output:
-        report(
+        index=report(
             str(Path(REPORTS, "index.html")),
             caption="../report/index_page.rst",
             category="HTML report",
             labels={"page": "index"},
+        ),
+        csv=report(
+            str(Path(REPORTS, "verdicts.csv")),
+            caption="../report/verdicts.rst",
+            category="HTML report",
+            labels={"page": "verdicts"},
         ),
     log:
         str(Path(RESULTS, "logs", "report_index.log")),
@@ -94,4 +100,4 @@ rule report_index:
         ENV
     shell:
         "{params.cli} report index --summaries {input.summaries} {params.earlier} {params.pending}"
-        " --out {output} > {log} 2>&1"
+        " --out {output.index} --csv {output.csv} > {log} 2>&1"

@@ -1,0 +1,106 @@
+"""The paired verdicts of every scene in one table: the index page's matrix and verdicts.csv."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import pandas as pd
+import pytest
+
+from stages.report.cli import main as report_main
+from stages.report.index_page import build_index, load_summaries
+from stages.report.verdict_table import COLUMNS, short_verdict, verdict_matrix_html, verdict_rows, verdicts_csv
+from stages.scene import InputError
+
+
+def _row(baseline: str, metric: str, mean: float | None, ci: list[float] | None, verdict: str,
+         flagged: list[str] | None = None) -> dict:
+    return {"livescene": "livescene", "baseline": baseline, "metric": metric, "n": 8, "mean_difference": mean,
+            "ci95": ci, "verdict": verdict, "rests_on_flagged_run": flagged or [], "statement": verdict, "note": ""}
+
+
+def _summary(scene: str, objects: list[str], verdict: list[dict]) -> dict:
+    return {"scene": scene, "page": f"scenes/{scene}.html", "objects": objects, "frames": 80,
+            "registered_fraction": 1.0, "methods": {}, "verdict": verdict, "skipped": [], "job_seconds": 1.0}
+
+
+SUMMARIES = [
+    _summary("office", ["a", "b", "c"], [
+        _row("mk-planes", "held_out_psnr", 0.83, [0.08, 1.58], "LiveScene ahead"),
+        _row("mk-planes", "locality_outside", -6.2, [-7.0, -5.4], "LiveScene ahead"),
+        _row("conerf", "held_out_psnr", 2.1, [1.0, 3.2], "LiveScene ahead", flagged=["conerf"])]),
+    _summary("pantry", ["fridge"], [
+        _row("mk-planes", "held_out_psnr", -0.75, [-1.18, -0.31], "LiveScene behind"),
+        _row("mk-planes", "grounding_iou", 0.0021, [-0.01, 0.014], "no measurable difference (n=8)"),
+        _row("mk-planes", "unseen_psnr", None, None, "no paired items")]),
+    _summary("alone", ["a"], []),  # LiveScene alone: no verdict, no rows
+]
+
+
+def test_short_verdicts():
+    assert [short_verdict(v) for v in ("LiveScene ahead", "LiveScene behind", "no measurable difference (n=16)",
+                                       "no paired items")] == ["ahead", "behind", "level", "none"]
+
+
+def test_rows_are_tidy_and_keep_every_scene_and_metric():
+    frame = verdict_rows(SUMMARIES)
+    assert list(frame.columns) == COLUMNS and len(frame) == 6
+    pantry = frame[frame["scene"] == "pantry"].set_index("metric")
+    assert pantry.loc["held_out_psnr", "verdict"] == "behind" and pantry.loc["held_out_psnr", "objects"] == 1
+    assert (pantry.loc["held_out_psnr", "ci95_low"], pantry.loc["held_out_psnr", "ci95_high"]) == (-1.18, -0.31)
+    assert pantry.loc["grounding_iou", "verdict"] == "level"
+    assert pd.isna(pantry.loc["unseen_psnr", "mean_difference"]) and pantry.loc["unseen_psnr", "verdict"] == "none"
+    assert frame[frame["baseline"] == "conerf"]["rests_on_flagged_run"].tolist() == ["conerf"]
+
+
+def test_csv_round_trips_exactly():
+    frame = verdict_rows(SUMMARIES)
+    text = verdicts_csv(frame)
+    assert text == verdicts_csv(verdict_rows(SUMMARIES))  # the same summaries give the same bytes
+    back = pd.read_csv(io.StringIO(text), keep_default_na=False, na_values=[""])
+    assert back["mean_difference"].tolist()[:3] == [0.83, -6.2, 2.1]  # no rounding
+    assert back["verdict"].tolist() == frame["verdict"].tolist()
+
+
+def test_matrix_has_a_row_per_scene_and_baseline_and_a_tally():
+    html = verdict_matrix_html(verdict_rows(SUMMARIES))
+    matrix, tally = html.split("<table")[1], html.split("<table")[2]
+    # rows (office, mk-planes), (office, conerf), (pantry, mk-planes); metric columns in paired.METRICS order
+    assert matrix.count("<tr>") == 4
+    assert matrix.index("held-out PSNR (dB)") < matrix.index("unseen combinations (dB)") \
+        < matrix.index("grounding IoU") < matrix.index("locality (lower is better) (/255)")
+    assert '<span class="ok">ahead</span> +0.83 [0.08, 1.58]' in matrix
+    assert '<span class="fail">behind</span> -0.75 [-1.18, -0.31]' in matrix
+    assert '<span class="skip">level</span> +0.002 [-0.010, 0.014]' in matrix
+    assert '<span class="flag">&#9888; conerf</span>' in matrix
+    assert "alone" not in matrix  # no verdict, no row
+    # mk-planes' held-out PSNR: office ahead, pantry behind
+    assert "<td>mk-planes</td><td>held-out PSNR per view</td><td class=\"num\">2</td><td class=\"num\">1</td>" \
+           "<td class=\"num\">0</td><td class=\"num\">1</td>" in tally
+
+
+def test_no_verdict_anywhere_says_why():
+    html = verdict_matrix_html(verdict_rows([SUMMARIES[2]]))
+    assert "No scene has a paired verdict" in html and "<table" not in html
+
+
+def test_index_cli_writes_the_page_and_the_csv(tmp_path, capsys):
+    files = []
+    for s in SUMMARIES:
+        files.append(tmp_path / f"{s['scene']}.json")
+        files[-1].write_text(json.dumps(s))
+    out, csv = tmp_path / "reports" / "index.html", tmp_path / "reports" / "verdicts.csv"
+    assert report_main(["index", "--summaries", *map(str, files), "--out", str(out), "--csv", str(csv)]) == 0
+    page = out.read_text()
+    assert "Verdicts across scenes" in page and page.count("<h2>") == 1
+    assert page.index("Verdicts across scenes") > page.index('href="scenes/pantry.html"')
+    assert csv.read_text() == verdicts_csv(verdict_rows(SUMMARIES))
+    assert build_index(SUMMARIES) == page
+
+
+def test_index_names_an_unreadable_summary(tmp_path):
+    bad = tmp_path / "summary.json"
+    bad.write_text("{not json")
+    with pytest.raises(InputError, match="unreadable scene summary"):
+        load_summaries([bad])
