@@ -129,3 +129,13 @@ def test_default_profile_counts_trainings_and_renders_as_one_core_each(workflow_
             assert "--set train.threads=2" in text, text
         if rule == "export":
             assert "--threads" not in text, text
+
+
+def test_colmap_takes_one_core(workflow_copy):
+    """COLMAP runs on one thread in the workflow (deterministic poses), so its rule asks for one core: with two it
+    waited for both to be free, behind every one-core training and evaluation of a sheet of scenes."""
+    poses = [text for rule, text in workflow_copy.dry_run().blocks() if rule == "poses"]
+    assert len(poses) == 1
+    assert not re.search(r"^\s*threads: ", poses[0], flags=re.M), poses[0]  # a dry run prints `threads:` above 1
+    assert "--threads 1" in poses[0] and "--parallel" not in poses[0], poses[0]
+    assert not any(entry.startswith("poses=") for entry in profile("slurm")["set-threads"])
