@@ -10,7 +10,7 @@ from pathlib import Path
 from stages.scene import InputError
 
 from .html_parts import fmt, page, table
-from .verdict_table import verdict_matrix_html, verdict_rows
+from .verdict_table import short_verdict, verdict_matrix_html, verdict_rows
 
 
 def load_summaries(summary_files: list[str | Path]) -> list[dict]:
@@ -42,11 +42,14 @@ def build_index(summaries: list[dict], pending: list[str] | None = None) -> str:
         names = ", ".join(escape(n) for n in pending)
         waiting = (f"<p>Scenes of the sheet without a page yet: {names}. Build one with "
                    f"<code>snakemake --cores 2 --config only={escape(pending[0])}</code>.</p>")
+    # the verdicts first: over a sheet of rooms they are what the index is read for; the scenes table below
+    # counts them per baseline and links each scene's page
     body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline. A flagged run "
             "(&#9888;) is under its trust floors: its numbers are not results.</p>"
+            + "<h2>Verdicts across scenes</h2>" + verdict_matrix_html(verdict_rows(summaries))
+            + "<h2>Scenes</h2>"
             + table(["scene", "objects", "frames", "poses registered", "methods (held-out)",
-                     "LiveScene vs baselines (paired, 95% CI)", "rules skipped", "job seconds"], rows) + waiting
-            + "<h2>Verdicts across scenes</h2>" + verdict_matrix_html(verdict_rows(summaries)))
+                     "LiveScene vs baselines (paired metrics)", "rules skipped", "job seconds"], rows) + waiting)
     return page("LiveScene reports", body)
 
 
@@ -57,12 +60,21 @@ def _flag(trust: dict | None) -> str:
 
 
 def _verdicts(rows: list[dict]) -> str:
-    """One line per baseline and metric; a verdict resting on a flagged run says so."""
-    lines = []
+    """Per baseline, how many paired metrics LiveScene is ahead, level or behind on (the matrix above has each);
+    a count resting on a flagged run says so."""
+    counts: dict[str, dict[str, int]] = {}
+    flagged: dict[str, set[str]] = {}
     for r in rows:
-        line = f"vs {escape(str(r.get('baseline')))}, {escape(str(r.get('metric')))}: {escape(str(r.get('verdict')))}"
-        if r.get("rests_on_flagged_run"):
-            flagged = escape(", ".join(r["rests_on_flagged_run"]))
-            line += f' <span class="flag">&#9888; rests on flagged {flagged}</span>'
+        baseline = str(r.get("baseline"))
+        word = short_verdict(str(r.get("verdict")))
+        counts.setdefault(baseline, {}).setdefault(word, 0)
+        counts[baseline][word] += 1
+        flagged.setdefault(baseline, set()).update(r.get("rests_on_flagged_run") or [])
+    lines = []
+    for baseline, c in counts.items():
+        line = f"vs {escape(baseline)}: " + ", ".join(f"{c.get(w, 0)} {w}" for w in ("ahead", "level", "behind"))
+        if flagged[baseline]:
+            names = escape(", ".join(sorted(flagged[baseline])))
+            line += f' <span class="flag">&#9888; rests on flagged {names}</span>'
         lines.append(line)
     return "<br>".join(lines) or "–"

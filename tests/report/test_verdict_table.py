@@ -93,8 +93,10 @@ def test_index_cli_writes_the_page_and_the_csv(tmp_path, capsys):
     out, csv = tmp_path / "reports" / "index.html", tmp_path / "reports" / "verdicts.csv"
     assert report_main(["index", "--summaries", *map(str, files), "--out", str(out), "--csv", str(csv)]) == 0
     page = out.read_text()
-    assert "Verdicts across scenes" in page and page.count("<h2>") == 1
-    assert page.index("Verdicts across scenes") > page.index('href="scenes/pantry.html"')
+    assert "Verdicts across scenes" in page and page.count("<h2>") == 2
+    assert page.index("Verdicts across scenes") < page.index('href="scenes/pantry.html"')
+    # the scenes table counts each baseline's verdicts: office vs mk-planes ahead twice, pantry behind once
+    assert "vs mk-planes: 2 ahead, 0 level, 0 behind" in page and "vs mk-planes: 0 ahead, 1 level, 1 behind" in page
     assert csv.read_text() == verdicts_csv(verdict_rows(SUMMARIES))
     assert build_index(SUMMARIES) == page
 

@@ -225,7 +225,9 @@ def test_page_and_summary_carry_the_verdict_and_the_flags(tmp_path, tiny_dataset
 
     index = build_index(load_summaries([tmp_path / "summary.json"]))
     assert "conerf: PSNR 21.00 dB" in index and "&#9888; undertrained" in index
-    assert "vs conerf, held_out_psnr: LiveScene behind" in index and "rests on flagged conerf" in index
+    # the fakes: behind on held-out, ahead on unseen combinations, level on grounding (no split, no locality items)
+    assert "vs conerf: 1 ahead, 1 level, 1 behind" in index and "rests on flagged conerf" in index
+    assert index.index("Verdicts across scenes") < index.index("<h2>Scenes</h2>")
 
 
 def test_curves_against_steps_and_wall_time(tmp_path, tiny_dataset):
