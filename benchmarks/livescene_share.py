@@ -18,7 +18,7 @@ import tempfile
 import time
 from contextlib import contextmanager
 
-from train_throughput import add_run_arguments, bench_config, bench_inputs, resolve_start_step
+from train_throughput import add_run_arguments, bench_config, bench_inputs, per_round_ratio, resolve_start_step
 
 from stages.scene.machine import machine_info, machine_line
 
@@ -101,10 +101,8 @@ def main() -> int:
     print("|---|---|---|")
     base = times["MK-Planes"]
     for name, t in times.items():
-        per_round = sorted(a / b for a, b in zip(t, base, strict=True))
-        lo, hi = (per_round[min(int(f * len(per_round)), len(per_round) - 1)] for f in (0.25, 0.75))
-        print(f"| {name} | {statistics.median(t) * 1000:.1f} | {statistics.median(per_round):.2f}x "
-              f"({lo:.2f}-{hi:.2f}) |")
+        median, lo, hi = per_round_ratio(t, base)
+        print(f"| {name} | {statistics.median(t) * 1000:.1f} | {median:.2f}x ({lo:.2f}-{hi:.2f}) |")
     return 0
 
 

@@ -116,6 +116,16 @@ def bench_config(args: argparse.Namespace, method: str, with_language: bool, dat
                        language_targets=str(targets) if with_language else "")
 
 
+def per_round_ratio(a: list[float], b: list[float]) -> tuple[float, float, float]:
+    """Median, 25th and 75th percentile of ``a[i] / b[i]``: step times taken in the same round, so the machine's
+    drift between rounds cancels."""
+    import statistics
+
+    per_round = sorted(x / y for x, y in zip(a, b, strict=True))
+    lo, hi = (per_round[min(int(f * len(per_round)), len(per_round) - 1)] for f in (0.25, 0.75))
+    return statistics.median(per_round), lo, hi
+
+
 def print_ratios(ratio) -> None:
     """The issue's two step-time ratios; ``ratio(a, b)`` formats a / b of two (method, language) keys, or None."""
     pairs = [("language tax (LiveScene on / off)", ("livescene", True), ("livescene", False))]
@@ -237,10 +247,8 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
     def ratio(a: tuple[str, bool], b: tuple[str, bool]) -> str | None:
         if a not in times or b not in times:
             return None
-        per_round = sorted(x / y for x, y in zip(times[a], times[b], strict=True))
-        q = lambda f: per_round[min(int(f * len(per_round)), len(per_round) - 1)]  # noqa: E731
-        return (f"{statistics.median(per_round):.2f}x (median of per-round ratios; 25-75 %: "
-                f"{q(0.25):.2f}-{q(0.75):.2f})")
+        median, lo, hi = per_round_ratio(times[a], times[b])
+        return f"{median:.2f}x (median of per-round ratios; 25-75 %: {lo:.2f}-{hi:.2f})"
 
     print_ratios(ratio)
     return 0

@@ -1,5 +1,5 @@
-"""The index page: one row per scene with its headline numbers and a link to its page, then the paired
-verdicts of every scene in one matrix (``verdict_table.py``)."""
+"""The index page: the paired verdicts of every scene in one matrix (``verdict_table.py``), then one row per
+scene with its headline numbers and a link to its page."""
 
 from __future__ import annotations
 
@@ -7,10 +7,12 @@ import json
 from html import escape
 from pathlib import Path
 
+import pandas as pd
+
 from stages.scene import InputError
 
 from .html_parts import fmt, page, table
-from .verdict_table import short_verdict, verdict_matrix_html, verdict_rows
+from .verdict_table import WORDS, verdict_counts, verdict_matrix_html, verdict_rows
 
 
 def load_summaries(summary_files: list[str | Path]) -> list[dict]:
@@ -28,6 +30,7 @@ def load_summaries(summary_files: list[str | Path]) -> list[dict]:
 def build_index(summaries: list[dict], pending: list[str] | None = None) -> str:
     """HTML of the index page from the scenes' summaries (each links its page by its "page"); ``pending``
     names the sheet's scenes that have no page yet (a run restricted with ``--config only=...``)."""
+    verdicts = verdict_rows(summaries)
     rows = []
     for s in summaries:
         methods = "<br>".join(f"{escape(name)}: PSNR {fmt(v.get('psnr'), 2)} dB, SSIM {fmt(v.get('ssim'), 3)}, "
@@ -35,7 +38,7 @@ def build_index(summaries: list[dict], pending: list[str] | None = None) -> str:
                               for name, v in s["methods"].items())
         rows.append([f'<a href="{escape(s["page"])}">{escape(s["scene"])}</a>',
                      escape(", ".join(s.get("objects", []))), s.get("frames"), s.get("registered_fraction"),
-                     methods or "–", _verdicts(s.get("verdict") or []),
+                     methods or "–", _verdicts(verdicts[verdicts["scene"] == s.get("scene")]),
                      escape(", ".join(s.get("skipped", [])) or "none"), s.get("job_seconds")])
     waiting = ""
     if pending:
@@ -46,7 +49,7 @@ def build_index(summaries: list[dict], pending: list[str] | None = None) -> str:
     # counts them per baseline and links each scene's page
     body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline. A flagged run "
             "(&#9888;) is under its trust floors: its numbers are not results.</p>"
-            + "<h2>Verdicts across scenes</h2>" + verdict_matrix_html(verdict_rows(summaries))
+            + "<h2>Verdicts across scenes</h2>" + verdict_matrix_html(verdicts)
             + "<h2>Scenes</h2>"
             + table(["scene", "objects", "frames", "poses registered", "methods (held-out)",
                      "LiveScene vs baselines (paired metrics)", "rules skipped", "job seconds"], rows) + waiting)
@@ -59,22 +62,15 @@ def _flag(trust: dict | None) -> str:
     return f' <span class="flag">&#9888; {escape(str(trust.get("label", "flagged")))}</span>'
 
 
-def _verdicts(rows: list[dict]) -> str:
+def _verdicts(scene: pd.DataFrame) -> str:
     """Per baseline, how many paired metrics LiveScene is ahead, level or behind on (the matrix above has each);
     a count resting on a flagged run says so."""
-    counts: dict[str, dict[str, int]] = {}
-    flagged: dict[str, set[str]] = {}
-    for r in rows:
-        baseline = str(r.get("baseline"))
-        word = short_verdict(str(r.get("verdict")))
-        counts.setdefault(baseline, {}).setdefault(word, 0)
-        counts[baseline][word] += 1
-        flagged.setdefault(baseline, set()).update(r.get("rests_on_flagged_run") or [])
     lines = []
-    for baseline, c in counts.items():
-        line = f"vs {escape(baseline)}: " + ", ".join(f"{c.get(w, 0)} {w}" for w in ("ahead", "level", "behind"))
-        if flagged[baseline]:
-            names = escape(", ".join(sorted(flagged[baseline])))
-            line += f' <span class="flag">&#9888; rests on flagged {names}</span>'
+    for baseline, group in scene.groupby("baseline", sort=False):
+        line = f"vs {escape(str(baseline))}: " + ", ".join(
+            f"{n} {word}" for n, word in zip(verdict_counts(group), WORDS, strict=True))
+        flagged = sorted({name for names in group["rests_on_flagged_run"] for name in names.split(";") if name})
+        if flagged:
+            line += f' <span class="flag">&#9888; rests on flagged {escape(", ".join(flagged))}</span>'
         lines.append(line)
     return "<br>".join(lines) or "–"

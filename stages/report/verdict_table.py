@@ -3,7 +3,7 @@
 Each scene page ends in its own verdict (``paired.py``); a user who runs the workflow over a sheet of rooms
 wants to see across them where LiveScene is ahead, level or behind without opening every page. The index
 page shows the matrix (a row per scene and baseline, a column per paired metric) and a tally per baseline and
-metric; ``verdicts.csv`` beside it holds the same rows in tidy form for pandas (docs/workflow.md, "Reports").
+metric; ``verdicts.csv`` beside it holds the same rows in tidy form for pandas (docs/workflow.md, "The report").
 """
 
 from __future__ import annotations
@@ -33,6 +33,16 @@ HEADERS = {"held_out_psnr": "held-out PSNR", "held_out_psnr_objects": "held-out,
 
 def short_verdict(sentence: str) -> str:
     return SHORT.get(sentence, "level" if sentence.startswith("no measurable difference") else sentence)
+
+
+WORDS = ("ahead", "level", "behind")
+"""The verdicts counted in the tally and in the index's scenes table ("none" is not counted)."""
+
+
+def verdict_counts(group: pd.DataFrame) -> list[int]:
+    """How many of ``group``'s rows read ahead, level and behind (``WORDS`` order)."""
+    counts = group["verdict"].value_counts()
+    return [int(counts.get(word, 0)) for word in WORDS]
 
 
 def verdict_rows(summaries: list[dict]) -> pd.DataFrame:
@@ -83,9 +93,7 @@ def verdict_matrix_html(frame: pd.DataFrame) -> str:
                                                   for m in metrics]
     tally = []
     for (baseline, metric), group in frame.groupby(["baseline", "metric"], sort=False):
-        counts = group["verdict"].value_counts()
-        tally.append([escape(str(baseline)), escape(LABELS.get(metric, metric)), len(group),
-                      int(counts.get("ahead", 0)), int(counts.get("level", 0)), int(counts.get("behind", 0))])
+        tally.append([escape(str(baseline)), escape(LABELS.get(metric, metric)), len(group), *verdict_counts(group)])
     return ("<p>LiveScene minus each baseline on the same items, per scene: the verdict, the mean difference and "
             "its 95% interval (ahead or behind only when the interval excludes 0; locality is lower-is-better, "
             "so there a negative difference is ahead). Each scene page says what its items are.</p>"
