@@ -144,7 +144,7 @@ def _run_generate(argv: list[str]) -> int:
     if args.seed is not None:
         spec.seed = args.seed
     refuse_clobber(out, args.force)
-    generate_capture(spec, out, progress=not args.no_progress)
+    generate_capture(spec, out, progress=not args.no_progress, replace=args.force)
     meta = json.loads((out / "capture.json").read_text())
     print(f"{out}: {meta['n_frames']} frames {meta['width']}x{meta['height']}, objects {meta['objects']}, "
           f"{meta['timings']['total_s']:.1f} s")
@@ -191,7 +191,7 @@ def _run_dataset(argv: list[str]) -> int:
     out = Path(args.out)
     refuse_clobber(out, args.force)
     ds = capture_to_dataset(args.capture, out, split=args.split, split_n=args.split_n, every=args.every,
-                            images=args.images, progress=not args.no_progress)
+                            images=args.images, progress=not args.no_progress, replace=args.force)
     splits = {s: len(ds.frames_in(s)) for s in ("train", "test")}
     print(f"{out}: valid scene dataset, {len(ds.frames)} frames {splits}, objects {ds.objects}, "
           f"{len(ds.key_frames)} key frames")

@@ -107,8 +107,11 @@ def scene_info(spec: CaptureSpec, renderer: SceneRenderer) -> dict[str, Any]:
     }
 
 
-def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = True) -> Path:
-    """Render every frame of ``spec`` and write the capture folder atomically; returns ``out_dir``."""
+def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = True, replace: bool = False) -> Path:
+    """Render every frame of ``spec`` and write the capture folder atomically; returns ``out_dir``.
+
+    ``replace``: an existing ``out_dir`` that is not an earlier capture is replaced too (``--force``).
+    """
     out_dir = Path(out_dir)
     t_start = time.perf_counter()
     renderer = SceneRenderer(spec)
@@ -120,7 +123,7 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
     v = spec.video
     render_s = write_s = 0.0
     gains = frame_gains(spec)
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "capture", legacy=["capture.json"], force=replace) as tmp:
         for sub in ("masks", "truth/depth", "truth/images"):
             (tmp / sub).mkdir(parents=True, exist_ok=True)
         video_path = tmp / "video.mp4"

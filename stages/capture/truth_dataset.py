@@ -82,12 +82,13 @@ def _video_frames(path: Path, wanted: set[int], expected: int) -> dict[int, np.n
 
 def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: str = "alternate",
                        split_n: int = 10, every: int = 1, images: ImageSource = "video",
-                       progress: bool = True) -> SceneDataset:
+                       progress: bool = True, replace: bool = False) -> SceneDataset:
     """Write the scene dataset of a capture's truth to ``out_dir`` (atomically) and return it, validated.
 
     ``every`` keeps every n-th video frame (source index 0, n, 2n, ...); key frames that fall
     on dropped frames are dropped with them. ``split`` is a ``stages.scene.make_split`` method
-    applied to the kept frames in order.
+    applied to the kept frames in order. ``replace``: an existing ``out_dir`` that is not an earlier dataset
+    is replaced too (``--force``).
     """
     cap = Path(capture_dir)
     out_dir = Path(out_dir)
@@ -114,7 +115,7 @@ def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: s
         id_to_channel[k] = channel
 
     frames: list[Frame] = []
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "dataset", inputs=[capture_dir], legacy=["scene.json"], force=replace) as tmp:
         (tmp / "images").mkdir()
         for fr, sp in tqdm(list(zip(kept, splits, strict=True)), desc="capture dataset", unit="frame",
                            disable=not progress):

@@ -100,6 +100,7 @@ def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict
         raise AssembleError(tpath, "no registered frames", "re-run `livescene poses` (or check the file)")
     shared = camera_from_dict(data, tpath, "top level") if "fl_x" in data else None
     frames = []
+    seen: dict[str, int] = {}
     for i, fr in enumerate(raw):
         where = f"frames[{i}]"
         if not isinstance(fr, dict) or "file_path" not in fr or "transform_matrix" not in fr:
@@ -107,6 +108,10 @@ def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict
         name = Path(str(fr["file_path"])).name
         if Path(name).suffix.lower() not in IMAGE_SUFFIXES:
             name += ".png"
+        if name in seen:
+            raise AssembleError(tpath, f"frames[{seen[name]}] and {where} both give a pose for {name}",
+                                "keep one entry per image (the later one would silently replace the earlier)")
+        seen[name] = i
         cam = camera_from_dict(fr, tpath, where) if "fl_x" in fr else None
         if cam is None and shared is None:
             raise AssembleError(tpath, f"{where}: no intrinsics", "give fl_x, fl_y, cx, cy, w, h")
@@ -233,7 +238,8 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
     splits = make_split(len(use), config.split, n=config.split_n, test_fraction=config.test_fraction)
     used_ids = {fid for fid, _ in use}
     without_masks: list[str] = []
-    with atomic_dir(config.out) as tmp:
+    inputs = [p for p in (config.frames, config.poses, config.labels, config.states) if p]
+    with atomic_dir(config.out, "dataset", inputs=inputs, legacy=["scene.json"]) as tmp:
         (tmp / "images").mkdir()
         frames: list[Frame] = []
         for (fid, p), split in tqdm(list(zip(use, splits, strict=True)), desc="assemble", unit="frame",

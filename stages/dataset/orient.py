@@ -165,7 +165,7 @@ def orient_dataset(src: str | Path, out: str | Path, points: str | Path | None =
     meta["orientation"] = orient.as_dict(src)
     new = replace(ds, frames=frames, scene_box=box, meta=meta, nerfstudio=nerfstudio)
 
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out, "dataset", inputs=[src], legacy=["scene.json"]) as tmp:
         for rel, source in names.items():
             (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
             place_image(source, tmp / rel, copy=False)

@@ -504,7 +504,7 @@ def evaluate_run(run: Any, dataset: SceneDataset, out_dir: str | Path, truth: Tr
     (render seconds, fps, stage seconds) are in timings.json next to it.
     """
     out_dir = Path(out_dir)
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "evaluate", inputs=[dataset.root], legacy=["metrics.json"]) as tmp:
         evaluator = Evaluator(run, dataset, truth, grounder, config)
         metrics = evaluator.evaluate(tmp)
         if extra:

@@ -198,7 +198,7 @@ def export_run(run: Renderable, dataset: SceneDataset, combos: Sequence[Mapping[
     up = world_up_axis([f.c2w for f in dataset.frames])
     out = Path(out)
     records = []
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out, "export", inputs=[dataset.root], legacy=["export.json"]) as tmp:
         for states, slug in zip(full, slugs, strict=True):
             (tmp / slug).mkdir()
             record = export_state(run, views, box, states, options, tmp / slug, progress, up=up)

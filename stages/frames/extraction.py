@@ -98,7 +98,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
     all_sharpness: list[float | None] = []
     size: tuple[int, int] | None = None
 
-    with atomic_dir(cfg.out_dir) as out:
+    with atomic_dir(cfg.out_dir, "frames", inputs=[cfg.source], legacy=["frames.json"]) as out:
         image_dirs = {1: out / "images", **{f: out / f"images_{f}" for f in cfg.downscale}}
         for d in image_dirs.values():
             d.mkdir()

@@ -195,7 +195,8 @@ def ingest_labels(config: LabelsConfig) -> dict:
         return {f: [n for n, s in zip(names, row, strict=True) if s] for f, row in zip(ids, small, strict=True)
                 if row.any()}
 
-    with atomic_dir(config.out) as tmp:
+    with atomic_dir(config.out, "labels", inputs=[p for p in (config.input, config.frames, config.mapping) if p],
+                    legacy=["labels.json"]) as tmp:
         order = [f for f in frames.frame_ids if f in matched]
         for fid in tqdm(order, desc="labels", unit="frame", disable=not config.progress):
             entry = by_source[matched[fid]]

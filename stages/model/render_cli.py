@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         camera = read_scene(data, validate=False).camera
     out = run.render(camera, c2w, _parse_states(args.state) or None, frame_index=frame_index)
     state = run.state_vector(_parse_states(args.state) or None, frame_index)
-    with atomic_dir(args.out) as tmp:
+    with atomic_dir(args.out, "render", inputs=[args.run], legacy=["render.yaml"]) as tmp:
         _write_png(tmp / "rgb.png", out["rgb"])
         depth = out["depth"]
         lo, hi = float(np.percentile(depth, 1)), float(np.percentile(depth, 99))

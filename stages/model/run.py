@@ -15,6 +15,7 @@ the run was trained with language targets.
 from __future__ import annotations
 
 import json
+import pickle
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -185,8 +186,14 @@ def load_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
     if not path.is_file():
         raise InputError(path, "no trained model in this run folder",
                          "train one with `livescene train --data DS --out RUN` (or resume it to the end)")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    if payload.get("format") != MODEL_FORMAT:
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except (RuntimeError, EOFError, OSError, pickle.UnpicklingError) as exc:
+        resume = " or resume its training (`livescene train --resume --out RUN`, from checkpoints/)" if any(
+            (run_dir / "checkpoints").glob("step_*.pt")) else ""
+        raise InputError(path, f"cannot be read, truncated or corrupt ({str(exc).splitlines()[0]})",
+                         f"copy the run folder again{resume}") from exc
+    if not isinstance(payload, dict) or payload.get("format") != MODEL_FORMAT:
         raise InputError(path, f"model format {payload.get('format')} was written by an older version of the model "
                          f"stage (this one reads format {MODEL_FORMAT})",
                          "retrain the run (`livescene train ... --out NEW`), or load it with the version that wrote it")

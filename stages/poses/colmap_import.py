@@ -316,7 +316,8 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
                              "write the poses to another folder")
     timings: dict[str, float] = {}
     warnings_: list[str] = []
-    with atomic_dir(cfg.out_dir) as out:
+    with atomic_dir(cfg.out_dir, "poses", inputs=[p for p in (cfg.model_dir, cfg.images_dir, cfg.frames_dir) if p],
+                    legacy=["poses.json"]) as out:
         t0 = time.perf_counter()
         rec = read_model(located)
         check_cameras(rec, located.folder)

@@ -47,7 +47,7 @@ def render_sweeps(run_dir: str | Path, data_dir: str | Path, out_dir: str | Path
                      "width": camera.width, "height": camera.height, "base_state": base, "objects": {}}
     start = time.perf_counter()
     jobs = [(name, k, v) for name in run.objects for k, v in enumerate(values)]
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "sweep", inputs=[run_dir, data_dir], legacy=["sweep.json"]) as tmp:
         for name, k, value in tqdm(jobs, desc="sweep", disable=not progress):
             states = dict(base, **{name: value})
             out = run.render(camera, frame.c2w, states, frame_index=index)

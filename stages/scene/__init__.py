@@ -1,6 +1,15 @@
 """The scene dataset contract shared by every stage: layout, cameras, rays, validation."""
 
-from .atomic_io import atomic_dir, atomic_path, write_json, write_npy, write_text, write_yaml
+from .atomic_io import (
+    STAGE_MARKER,
+    atomic_dir,
+    atomic_path,
+    guard_output_dir,
+    write_json,
+    write_npy,
+    write_text,
+    write_yaml,
+)
 from .camera import Camera, generate_rays, look_at, opencv_to_opengl, opengl_to_opencv, project_points
 from .dataset import Frame, SceneDataset, read_scene, validate_scene, write_scene
 from .errors import InputError, SceneError
@@ -15,6 +24,7 @@ from .splits import make_split
 from .yaml_io import read_yaml_mapping
 
 __all__ = [
+    "STAGE_MARKER",
     "Camera",
     "Frame",
     "InputError",
@@ -27,6 +37,7 @@ __all__ = [
     "box_to_unit_transform",
     "frame_id_of",
     "generate_rays",
+    "guard_output_dir",
     "label_map_to_onehot",
     "look_at",
     "make_split",

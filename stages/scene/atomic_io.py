@@ -12,12 +12,17 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
+
+from .errors import InputError
+
+STAGE_MARKER = ".livescene-stage"
+"""Written into every stage output folder: the stage's name, so that only its own earlier output is replaced."""
 
 
 def _current_umask() -> int:
@@ -40,6 +45,8 @@ def _publish_mode(path: Path, *, directory: bool) -> None:
 def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary file path next to ``path``; rename it onto ``path`` on success."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(path, "is a folder, and this output is a file", "give a file name (e.g. inside that folder)")
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(
         prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp", dir=path.parent
@@ -55,17 +62,63 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
             tmp_path.unlink()
 
 
-@contextlib.contextmanager
-def atomic_dir(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary folder next to ``path``; swap it into place on success.
+def _marker_stage(folder: Path) -> str | None:
+    marker = folder / STAGE_MARKER
+    try:
+        return marker.read_text().strip() if marker.is_file() else None
+    except OSError:
+        return None
 
-    An existing ``path`` is only replaced once the new content is complete.
+
+def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path] = (),
+                     legacy: Sequence[str] = (), force: bool = False) -> None:
+    """Refuse an output folder whose replacement would delete something that is not ``stage``'s own output.
+
+    A stage's output folder is replaced as a whole, so ``path`` may only be absent, empty, or an earlier output
+    of the same stage: it holds ``STAGE_MARKER`` naming ``stage`` (or, written before the marker existed, one of
+    the ``legacy`` record files and no marker), or anything when the user asked for it (``force``, a CLI's
+    ``--force``). It may never be one of the stage's ``inputs`` or a folder that holds one. Call it before long
+    work, so that a bad ``--out`` fails at once; ``atomic_dir`` calls it again.
     """
     path = Path(path)
+    target = path.resolve()
+    for item in inputs:
+        src = Path(item).resolve()
+        if src == target or target in src.parents:
+            what = "is the input" if src == target else "holds the input"
+            raise InputError(path, f"{what} {item}: the {stage} output replaces this folder as a whole",
+                             "choose another --out, outside the inputs")
+    if not path.exists() and not path.is_symlink():
+        return
+    if not path.is_dir() or path.is_symlink():
+        raise InputError(path, f"exists and is not a folder; the {stage} stage writes a folder here",
+                         "choose another --out, or move that file away")
+    if force or not any(path.iterdir()):
+        return
+    found = _marker_stage(path)
+    if found == stage or (found is None and any((path / name).is_file() for name in legacy)):
+        return
+    held = f"the output of the {found} stage" if found else "files that are not an output of this stage"
+    raise InputError(path, f"holds {held}; the {stage} output replaces this folder as a whole, which would delete "
+                     "them", f"choose another --out (an empty or new folder, or an earlier {stage} output), or move "
+                     "that folder away yourself")
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path] = (),
+               legacy: Sequence[str] = (), force: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder next to ``path``; swap it into place on success.
+
+    An existing ``path`` is only replaced once the new content is complete, and only if ``guard_output_dir``
+    allows it (checked before anything is written); the new folder carries ``STAGE_MARKER``.
+    """
+    path = Path(path)
+    guard_output_dir(path, stage, inputs=inputs, legacy=legacy, force=force)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     try:
         yield tmp
+        (tmp / STAGE_MARKER).write_text(stage + "\n")
         _publish_mode(tmp, directory=True)
         if path.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))

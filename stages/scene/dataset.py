@@ -129,6 +129,7 @@ class SceneDataset:
         img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if img is None:
             raise SceneError(path, "image missing or unreadable", "restore the image or drop the frame")
+        check_image_size(self, frame, path, img)
         if img.ndim == 2:
             img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
         scale = 65535.0 if img.dtype == np.uint16 else 255.0
@@ -323,6 +324,15 @@ def split_lists(frames: list[Frame]) -> dict[str, list[str]]:
             "val_filenames": test, "test_filenames": test}
 
 
+def check_image_size(ds: SceneDataset, frame: Frame, path: Path, img: np.ndarray) -> None:
+    """An image whose size is not its camera's (transforms.json's w / h) is refused, naming both sizes."""
+    cam = ds.camera_of(frame)
+    if img.shape[:2] != (cam.height, cam.width):
+        raise SceneError(path, f"image is {img.shape[1]}x{img.shape[0]} but transforms.json says "
+                         f"{cam.width}x{cam.height}", "rescale the intrinsics or the images "
+                         "(`livescene scene validate --deep` checks every image)")
+
+
 def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
     """Check the contract; raise the first SceneError found, naming file, problem and fix."""
     tpath = ds.root / "transforms.json"
@@ -354,12 +364,9 @@ def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
     if deep:
         for f in ds.frames:
             img = cv2.imread(str(ds.image_path(f)), cv2.IMREAD_UNCHANGED)
-            cam = ds.camera_of(f)
             if img is None:
                 raise SceneError(ds.image_path(f), "image unreadable", "re-extract the frame")
-            if img.shape[:2] != (cam.height, cam.width):
-                raise SceneError(ds.image_path(f), f"image is {img.shape[1]}x{img.shape[0]} but transforms.json "
-                                 f"says {cam.width}x{cam.height}", "rescale the intrinsics or the images")
+            check_image_size(ds, f, ds.image_path(f), img)
     if ds.has_masks:
         if not ds.objects:
             raise SceneError(ds.root / "mapping.yaml", "masks/ exists but mapping.yaml is missing or empty",

@@ -172,3 +172,31 @@ def test_the_poses_point_cloud_travels_with_the_dataset(tmp_path):
         assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds2",
                                       progress=False))
     assert not (tmp_path / "ds2").exists()
+
+
+def test_an_image_given_two_poses_is_refused(tmp_path, capsys):
+    paths = make_stage_outputs(tmp_path)
+    data = json.loads((paths["poses"] / "transforms.json").read_text())
+    twin = dict(data["frames"][2], file_path=data["frames"][0]["file_path"])
+    data["frames"].append(twin)
+    (paths["poses"] / "transforms.json").write_text(json.dumps(data))
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--out", str(tmp_path / "ds")])
+    err = capsys.readouterr().err
+    n = len(data["frames"]) - 1
+    assert code == 2 and f"frames[0] and frames[{n}] both give a pose for frame_00000.png" in err
+    assert not (tmp_path / "ds").exists()
+
+
+def test_an_out_folder_of_other_files_is_kept(tmp_path, capsys):
+    paths = make_stage_outputs(tmp_path)
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--out", str(out)])
+    assert code == 2 and "not an output of this stage" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--out", str(paths["frames"])])
+    assert code == 2 and "is the input" in capsys.readouterr().err

@@ -26,6 +26,7 @@ from frames_testdata import (
 from stages.frames import DROPPED_CSV, bytes_problem, decode_image
 from stages.frames.cli import main
 from stages.frames.integrity import DecoderReport, StderrCapture
+from stages.scene import STAGE_MARKER
 
 # a folder of 12 frames, numbered 0..11: these five are damaged, each in its own way
 DAMAGED = {
@@ -138,6 +139,7 @@ def test_too_many_damaged_images_are_refused(tmp_path: Path, capsys: pytest.Capt
     folder = damaged_folder(tmp_path, damaged, n=5)  # 3 of 5 damaged: more than half
     out = tmp_path / "frames"
     out.mkdir()
+    (out / STAGE_MARKER).write_text("frames\n")  # an earlier frames output, which a good run would replace
     (out / "earlier.txt").write_text("an earlier result")
     code, err = run_cli(capsys, "--video", str(folder), "--out", str(out))
     assert code == 2
@@ -146,7 +148,7 @@ def test_too_many_damaged_images_are_refused(tmp_path: Path, capsys: pytest.Capt
     for name, _, _ in damaged.values():
         assert name in line
     assert "fix: copy the images again" in line and "--max-dropped" in line
-    assert sorted(p.name for p in out.iterdir()) == ["earlier.txt"]  # nothing written, the old output kept
+    assert sorted(p.name for p in out.iterdir()) == [STAGE_MARKER, "earlier.txt"]  # nothing written, old output kept
     # asked for, the whole ones are kept
     code, err = run_cli(capsys, "--video", str(folder), "--out", str(out), "--max-dropped", "1")
     assert code == 0 and pd.read_csv(out / "frames.csv")["source_index"].tolist() == [0, 3]

@@ -63,6 +63,27 @@ def test_a_model_of_an_older_format_is_refused_with_the_fix(trained_run, tmp_pat
         load_run(old)
 
 
+def test_a_truncated_model_is_refused_with_the_fix(trained_run, tmp_path):
+    import shutil
+
+    cut = tmp_path / "cut"
+    shutil.copytree(trained_run, cut)
+    (cut / "model.pt").write_bytes((trained_run / "model.pt").read_bytes()[:1000])
+    with pytest.raises(InputError, match=r"model\.pt: cannot be read, truncated or corrupt.*fix: copy the run"):
+        load_run(cut)
+
+
+def test_render_into_the_run_folder_is_refused_and_the_run_kept(trained_run, tiny_dataset, tmp_path, capsys):
+    import shutil
+
+    run = tmp_path / "run_copy"
+    shutil.copytree(trained_run, run)
+    before = sorted(p.name for p in run.iterdir())
+    rc = render_main(["--run", str(run), "--pose", f"{tiny_dataset.root}/transforms.json:00001", "--out", str(run)])
+    assert rc == 2 and "is the input" in capsys.readouterr().err
+    assert sorted(p.name for p in run.iterdir()) == before
+
+
 def test_the_runs_dataset_is_found_from_the_cwd_or_the_run_folders_ancestors(tmp_path, monkeypatch):
     """config.yaml keeps --data as training got it (relative to where it ran): a moved results tree still opens."""
     root = tmp_path / "moved" / "repo"

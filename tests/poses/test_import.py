@@ -26,7 +26,7 @@ from stages.poses.cli import main as poses_main
 from stages.poses.colmap_import import ImportConfig, import_model
 from stages.poses.errors import PoseQualityError, StaticCameraError
 from stages.poses.model_export import transforms_dict
-from stages.scene import InputError, look_at, read_scene
+from stages.scene import STAGE_MARKER, InputError, look_at, read_scene
 
 NUMBERS, POSES = default_scene(12)
 COLMAP_NAMES = [f"{i:04d}.jpg" for i in NUMBERS]
@@ -65,7 +65,8 @@ def test_import_matches_frames_by_number(capture: tuple[Path, Path], tmp_path: P
     out = frames.parent / f"poses_{binary}_{layout.replace('/', '_')}"  # beside FRAMES, as results/<scene>/poses
     code = poses_main(["import", "--model", str(project), "--frames", str(frames), "--out", str(out)])
     assert code == 0
-    assert {p.name for p in out.iterdir()} == {"sparse", "transforms.json", "points3D.ply", "scene.json", "poses.json"}
+    assert {p.name for p in out.iterdir()} == {"sparse", "transforms.json", "points3D.ply", "scene.json", "poses.json",
+                                               STAGE_MARKER}
     transforms = json.loads((out / "transforms.json").read_text())
     frame_names = [f"frame_{i:05d}.png" for i in NUMBERS]
     # paths resolve from the folder of transforms.json (nerfstudio's data_dir / file_path)

@@ -1,5 +1,5 @@
-"""Atomic writes: a finished output has the usual permissions, replaces the old one whole, and a
-failure leaves the old output untouched."""
+"""Atomic writes: a finished output has the usual permissions, replaces the old one whole, a failure leaves
+the old output untouched, and a folder that is not the same stage's output (or is an input) is never replaced."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import stat
 
 import pytest
 
-from stages.scene.atomic_io import atomic_dir, write_json
+from stages.scene import InputError
+from stages.scene.atomic_io import STAGE_MARKER, atomic_dir, guard_output_dir, write_json
 
 
 def _mode(path) -> int:
@@ -19,7 +20,7 @@ def test_outputs_get_umask_permissions_not_tempfile_ones(tmp_path):
     old = os.umask(0o022)
     try:
         write_json(tmp_path / "a.json", {"x": 1})
-        with atomic_dir(tmp_path / "folder") as tmp:
+        with atomic_dir(tmp_path / "folder", "test") as tmp:
             (tmp / "inside.txt").write_text("hi")
     finally:
         os.umask(old)
@@ -29,10 +30,71 @@ def test_outputs_get_umask_permissions_not_tempfile_ones(tmp_path):
 
 def test_failed_write_keeps_the_previous_output(tmp_path):
     target = tmp_path / "folder"
-    with atomic_dir(target) as tmp:
+    with atomic_dir(target, "test") as tmp:
         (tmp / "v1.txt").write_text("one")
-    with pytest.raises(RuntimeError), atomic_dir(target) as tmp:
+    with pytest.raises(RuntimeError), atomic_dir(target, "test") as tmp:
         (tmp / "v2.txt").write_text("two")
         raise RuntimeError("interrupted")
-    assert sorted(p.name for p in target.iterdir()) == ["v1.txt"]
+    assert sorted(p.name for p in target.iterdir()) == [STAGE_MARKER, "v1.txt"]
     assert [p.name for p in tmp_path.iterdir()] == ["folder"]  # no temporary left behind
+
+
+def test_an_earlier_output_of_the_same_stage_is_replaced(tmp_path):
+    target = tmp_path / "frames"
+    for text in ("one", "two"):
+        with atomic_dir(target, "frames") as tmp:
+            (tmp / "frames.json").write_text(text)
+    assert (target / "frames.json").read_text() == "two"
+    assert (target / STAGE_MARKER).read_text().strip() == "frames"
+
+
+def test_a_folder_of_other_files_is_refused_and_kept(tmp_path):
+    target = tmp_path / "mine"
+    target.mkdir()
+    (target / "thesis.txt").write_text("precious")
+    with pytest.raises(InputError, match=r"not an output of this stage.*fix: choose another --out"), \
+            atomic_dir(target, "frames") as tmp:
+        (tmp / "frames.json").write_text("{}")
+    assert [p.name for p in target.iterdir()] == ["thesis.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
+
+
+def test_another_stages_output_is_refused(tmp_path):
+    run = tmp_path / "run"
+    with atomic_dir(run, "evaluate") as tmp:
+        (tmp / "metrics.json").write_text("{}")
+    with pytest.raises(InputError, match="holds the output of the evaluate stage"):
+        guard_output_dir(run, "render")
+
+
+def test_an_output_of_older_code_is_known_by_its_record_file(tmp_path):
+    old = tmp_path / "labels"
+    old.mkdir()
+    (old / "labels.json").write_text("{}")
+    guard_output_dir(old, "labels", legacy=["labels.json"])  # replaced, as before the marker existed
+    with pytest.raises(InputError):
+        guard_output_dir(old, "states", legacy=["states.json"])
+
+
+def test_an_input_or_a_folder_holding_one_is_refused(tmp_path):
+    source = tmp_path / "captures" / "room"
+    source.mkdir(parents=True)
+    (source / "video.mp4").write_bytes(b"x")
+    with pytest.raises(InputError, match="is the input"):
+        guard_output_dir(source, "frames", inputs=[source])
+    with pytest.raises(InputError, match="holds the input"):
+        guard_output_dir(tmp_path / "captures", "states", inputs=[source / "video.mp4"])
+    guard_output_dir(source / "frames", "frames", inputs=[source])  # a new folder inside an input is fine
+
+
+def test_a_file_in_the_way_is_refused(tmp_path):
+    (tmp_path / "out").write_text("x")
+    with pytest.raises(InputError, match="is not a folder"):
+        guard_output_dir(tmp_path / "out", "frames")
+
+
+def test_a_file_output_that_names_a_folder_is_refused(tmp_path):
+    (tmp_path / "adir").mkdir()
+    with pytest.raises(InputError, match="is a folder, and this output is a file"):
+        write_json(tmp_path / "adir", {"x": 1})
+    assert list((tmp_path / "adir").iterdir()) == []

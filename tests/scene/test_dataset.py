@@ -84,3 +84,19 @@ def test_normalisation_maps_box_to_unit_cube_and_keeps_poses_rigid():
     moved = apply_similarity_to_pose(t, pose)
     np.testing.assert_allclose(moved[:3, :3], np.eye(3))
     np.testing.assert_allclose(moved[:3, 3], apply_similarity_to_points(t, pose[:3, 3]))
+
+
+def test_an_image_of_another_size_is_named_when_loaded(tiny_dataset, tmp_path):
+    import shutil
+
+    import pytest
+
+    from stages.scene import SceneError
+
+    root = tmp_path / "ds"
+    shutil.copytree(tiny_dataset.root, root)
+    ds = read_scene(root)  # the shallow check does not open images
+    frame = ds.frames[3]
+    cv2.imwrite(str(ds.image_path(frame)), np.zeros((24, 32, 3), np.uint8))
+    with pytest.raises(SceneError, match=r"image is 32x24 but transforms\.json says 16x12.*--deep"):
+        ds.load_image(frame)

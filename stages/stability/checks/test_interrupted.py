@@ -16,7 +16,7 @@ import pytest
 import torch
 import yaml
 
-from stages.scene import read_scene
+from stages.scene import STAGE_MARKER, read_scene
 from stages.stability.collector import Outcome
 
 from .brief_training import TINY_MODEL, make_trainer
@@ -190,7 +190,7 @@ def test_snakemake_interrupt_reruns_incomplete(ctx: CaseContext, outcome: Outcom
     ds = read_scene(root / "dataset", validate=True)
     assert not (root / "run" / "run.json").exists(), "the interrupted train rule left run/run.json"
     partial = sorted(str(p.relative_to(root)) for p in root.rglob(".*") if p.is_file()
-                     and ".snakemake" not in p.parts and p.name != ".snakemake_timestamp")
+                     and ".snakemake" not in p.parts and p.name not in (".snakemake_timestamp", STAGE_MARKER))
     assert not partial, f"temporary files left by the interrupted run: {partial[:3]}"
     plan = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1"], cwd=root, env=env,
                           capture_output=True, text=True, timeout=120)
