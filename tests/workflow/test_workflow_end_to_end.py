@@ -23,7 +23,8 @@ USER_COMMANDS = ["close everything", "open the cupboard"]  # a synonym from prom
 @pytest.mark.slow
 def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     wf = workflow_copy
-    own = tmp_path / "own-capture"  # what a user brings: a video and separate files, no truth
+    # what a user brings: a video and separate files, no truth, in a folder whose name holds a space and a "#"
+    own = tmp_path / "own capture #1"
     subprocess.run([sys.executable, "-m", "stages.cli", "capture", "--spec", str(wf.root / "config/captures/tiny.yaml"),
                     "--out", str(own), "--no-progress"], check=True, capture_output=True)
     wf.write_scenes([{"scene": "tiny", "source": "synthetic", "path": "config/captures/tiny.yaml",

@@ -172,6 +172,28 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
     assert "MissingInputException" not in run.output
 
 
+def test_scene_sheet_comments_ragged_rows_empty_cells_and_an_empty_sheet(workflow_copy, tmp_path):
+    room = tmp_path / "room #2"  # a "#" inside a path is not a comment
+    room.mkdir()
+    (room / "video.mp4").write_bytes(b"")
+    sheet = workflow_copy.root / "config" / "scenes.tsv"
+    sheet.write_text("scene\tsource\tpath\n"
+                     "# an old scene, commented out\n"
+                     f"bare\tvideo\t{room / 'video.mp4'}\n"
+                     "\n"
+                     f"extra\tvideo\t{room / 'video.mp4'}\tno\n")
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    assert "line 3 (scene 'bare'): column 'masks': is empty or absent, so it takes its default 'yes'" in run.output
+    assert "does not exist" not in run.output  # the path with its "#" was read whole
+    assert "line 5: 4 tab-separated cells but the header has 3 columns" in run.output
+    assert "MissingInputException" not in run.output
+    sheet.write_text("# nothing yet\n\n")
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0 and "the scene sheet is empty; fix: write a tab-separated header line" in run.output
+    assert "EmptyDataError" not in run.output
+
+
 def test_imported_colmap_model_replaces_sfm_and_prompts_reach_assembly(workflow_copy, tmp_path):
     shots, model, truth = tmp_path / "shots", tmp_path / "sparse" / "0", tmp_path / "capture"
     for folder in (shots, model, truth / "truth"):

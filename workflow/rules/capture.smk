@@ -21,7 +21,7 @@ rule capture:
     conda:
         ENV
     shell:
-        "{params.cli} capture --spec {input.spec} --out {output} --seed {params.seed} --no-progress > {log} 2>&1"
+        "{params.cli} capture --spec {input.spec:q} --out {output:q} --seed {params.seed} --no-progress > {log:q} 2>&1"
 
 
 rule capture_dataset:
@@ -42,4 +42,4 @@ rule capture_dataset:
     conda:
         ENV
     shell:
-        "{params.cli} capture dataset --capture {input} --out {output} --no-progress > {log} 2>&1"
+        "{params.cli} capture dataset --capture {input:q} --out {output:q} --no-progress > {log:q} 2>&1"

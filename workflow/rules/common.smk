@@ -5,6 +5,11 @@
 # --- input functions and parameters of the stage rules ------------------------------------
 
 
+def q(path):
+    """A path as one shell word (quoted only when it holds spaces or other shell characters, as Snakemake's :q)."""
+    return shlex.quote(str(path))
+
+
 def evaluate_input(wildcards):
     scene = wildcards.scene
     files = dataset_input(wildcards)
@@ -25,9 +30,9 @@ def evaluate_args(wildcards, input):
     keys = input.keys()
     args = []
     if "truth" in keys:
-        args.append(f"--truth {input.truth}")
+        args.append(f"--truth {q(input.truth)}")
     if "pose_error" in keys:
-        args.append(f"--pose-alignment {input.pose_error}")
+        args.append(f"--pose-alignment {q(input.pose_error)}")
     if not has_names(wildcards.scene):
         args.append("--no-grounding")
     return " ".join(args)
@@ -72,9 +77,9 @@ def labels_args(wildcards, input):
     policy = config["labels"]["missing_masks"]
     missing = "" if policy == "propagate" else f" --missing-masks {policy}"
     if "capture" in input.keys():
-        return f"--input {Path(input.capture, 'masks')} --mapping {Path(input.capture, 'mapping.yaml')}{missing}"
-    names = f" --mapping {input.names}" if "names" in input.keys() else ""
-    return f"--input {input.masks}{names}{missing}"
+        return f"--input {q(Path(input.capture, 'masks'))} --mapping {q(Path(input.capture, 'mapping.yaml'))}{missing}"
+    names = f" --mapping {q(input.names)}" if "names" in input.keys() else ""
+    return f"--input {q(input.masks)}{names}{missing}"
 
 
 def control_commands(wildcards):
@@ -107,14 +112,14 @@ def train_input(wildcards):
 def train_args(wildcards, input):
     args = []
     if "targets" in input.keys():
-        args.append(f"--language-targets {input.targets}")
+        args.append(f"--language-targets {q(input.targets)}")
     # Without key frames a scene has no per-frame states to give: LiveScene learns them.
     if not carries(wildcards.scene, "key_frames"):
         args.append("--state-mode learned")
     if config["train"]["appearance"] != "none":  # the model's default: the reference
         args.append(f"--set model.appearance.mode={config['train']['appearance']}")
     if "exposure" in input.keys():  # measured once per scene (rule exposure), not once per method
-        args.append(f"--exposure {input.exposure}")
+        args.append(f"--exposure {q(input.exposure)}")
     return " ".join(args)
 
 
@@ -147,10 +152,10 @@ def poses_masks(wildcards, input):
     """Id maps that keep SIFT features off the moving objects: the capture's, the user's folder, or the labels
     stage's maps of a mask file."""
     if "capture" in input.keys():
-        return f"--masks {Path(input.capture, 'masks')}"
+        return f"--masks {q(Path(input.capture, 'masks'))}"
     if "labels" in input.keys():
-        return f"--masks {Path(input.labels, 'masks')}"
-    return f"--masks {input.masks}" if "masks" in input.keys() else ""
+        return f"--masks {q(Path(input.labels, 'masks'))}"
+    return f"--masks {q(input.masks)}" if "masks" in input.keys() else ""
 
 
 def assemble_input(wildcards):
@@ -169,11 +174,11 @@ def assemble_input(wildcards):
 
 def assemble_args(wildcards, input):
     keys = input.keys()
-    args = [f"--{k} {input[k]}" for k in ("labels", "states") if k in keys]
+    args = [f"--{k} {q(input[k])}" for k in ("labels", "states") if k in keys]
     if "prompts" in keys:
-        args.append(f"--prompts {input.prompts}")
+        args.append(f"--prompts {q(input.prompts)}")
     elif "capture" in keys and prompts_file(wildcards.scene) is not None and has_names(wildcards.scene):
-        args.append(f"--prompts {prompts_file(wildcards.scene)}")  # inside the capture folder (an input)
+        args.append(f"--prompts {q(prompts_file(wildcards.scene))}")  # inside the capture folder (an input)
     return " ".join(args)
 
 
@@ -194,10 +199,10 @@ def states_args(wildcards, input):
     ranges = "".join(f" --range {shlex.quote(item.strip())}"
                      for item in row(wildcards.scene)["state_ranges"].split(";") if item.strip())
     if "capture" in input.keys():
-        return (f"--key-frames {Path(input.capture, 'key_frame_value.yaml')}"
-                f" --mapping {Path(input.capture, 'mapping.yaml')}{ranges}")
-    names = f" --mapping {input.names}" if "names" in input.keys() else ""
-    return f"--key-frames {input.key_frames}{names}{ranges}"
+        return (f"--key-frames {q(Path(input.capture, 'key_frame_value.yaml'))}"
+                f" --mapping {q(Path(input.capture, 'mapping.yaml'))}{ranges}")
+    names = f" --mapping {q(input.names)}" if "names" in input.keys() else ""
+    return f"--key-frames {q(input.key_frames)}{names}{ranges}"
 
 
 def report_scene_input(wildcards):

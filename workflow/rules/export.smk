@@ -25,5 +25,5 @@ rule export:
     conda:
         ENV
     shell:
-        "{params.cli} export --run {params.run} --data {input.data} {params.args} --out {output}"
-        " --device {params.device} --no-progress > {log} 2>&1"
+        "{params.cli} export --run {params.run:q} --data {input.data:q} {params.args} --out {output:q}"
+        " --device {params.device} --no-progress > {log:q} 2>&1"

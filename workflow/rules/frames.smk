@@ -21,4 +21,4 @@ rule frames:
     conda:
         ENV
     shell:
-        "{params.cli} frames --video {params.video} --out {output}{params.select} --no-progress > {log} 2>&1"
+        "{params.cli} frames --video {params.video:q} --out {output:q}{params.select} --no-progress > {log:q} 2>&1"

@@ -20,4 +20,4 @@ rule labels:
     conda:
         ENV
     shell:
-        "{params.cli} labels {params.args} --frames {input.frames} --out {output} --no-progress > {log} 2>&1"
+        "{params.cli} labels {params.args} --frames {input.frames:q} --out {output:q} --no-progress > {log:q} 2>&1"

@@ -20,7 +20,7 @@ rule language_targets:
     conda:
         ENV
     shell:
-        "{params.cli} language targets --data {input.data} --out {output} > {log} 2>&1"
+        "{params.cli} language targets --data {input.data:q} --out {output:q} > {log:q} 2>&1"
 
 
 rule control:

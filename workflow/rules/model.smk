@@ -38,6 +38,6 @@ rule train:
     conda:
         ENV
     shell:
-        "{params.cli} train --data {input.data} --method {wildcards.method} --preset {params.preset}"
-        " --out {params.run} --resume --restart-stale --max-steps {params.steps} --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
-        " --set train.threads={params.torch_threads} --set train.eval_every={params.eval_every} {params.args} --no-progress > {log} 2>&1"
+        "{params.cli} train --data {input.data:q} --method {wildcards.method} --preset {params.preset}"
+        " --out {params.run:q} --resume --restart-stale --max-steps {params.steps} --max-seconds {params.seconds} --seed {params.seed} --device {params.device}"
+        " --set train.threads={params.torch_threads} --set train.eval_every={params.eval_every} {params.args} --no-progress > {log:q} 2>&1"

@@ -31,9 +31,9 @@ rule poses:
     conda:
         ENV
     shell:
-        "{params.cli} poses --frames {input.frames} --out {output} {params.masks} --threads {threads}"
+        "{params.cli} poses --frames {input.frames:q} --out {output:q} {params.masks} --threads {threads}"
         " --seed {params.seed} --matcher {params.matcher} --max-features {params.features}"
-        f"{NO_ORIENT} --no-progress > {{log}} 2>&1"
+        f"{NO_ORIENT} --no-progress > {{log:q}} 2>&1"
 
 
 rule poses_import:
@@ -57,8 +57,8 @@ rule poses_import:
     conda:
         ENV
     shell:
-        "{params.cli} poses import --model {input.model} --frames {input.frames} --out {output}"
-        f"{NO_ORIENT} > {{log}} 2>&1"
+        "{params.cli} poses import --model {input.model:q} --frames {input.frames:q} --out {output:q}"
+        f"{NO_ORIENT} > {{log:q}} 2>&1"
 
 
 rule pose_compare:
@@ -85,5 +85,5 @@ rule pose_compare:
     conda:
         ENV
     shell:
-        "{params.cli} poses compare --pred {input.poses}/transforms.json --truth {input.truth}/truth/transforms.json"
-        " --out {output} > {log} 2>&1"
+        "{params.cli} poses compare --pred {input.poses:q}/transforms.json --truth {input.truth:q}/truth/transforms.json"
+        " --out {output:q} > {log:q} 2>&1"

@@ -25,8 +25,8 @@ rule sweep:
     conda:
         ENV
     shell:
-        "{params.cli} report sweep --run {params.run} --data {input.data} --out {output} --steps {params.steps}"
-        " --scale {params.scale} --device {params.device} > {log} 2>&1"
+        "{params.cli} report sweep --run {params.run:q} --data {input.data:q} --out {output:q} --steps {params.steps}"
+        " --scale {params.scale} --device {params.device} > {log:q} 2>&1"
 
 
 rule report_scene:
@@ -60,10 +60,10 @@ rule report_scene:
     conda:
         ENV
     shell:
-        "printf '%s\\n' {params.manifest:q} > {output.inputs}"
-        " && {params.cli} report scene --scene {wildcards.scene} --inputs {output.inputs}"
+        "printf '%s\\n' {params.manifest:q} > {output.inputs:q}"
+        " && {params.cli} report scene --scene {wildcards.scene} --inputs {output.inputs:q}"
         " --methods {params.methods} --plan-json {params.plan:q} --views {params.views}"
-        " --out {output.page} --index {params.index} --summary {output.summary} > {log} 2>&1"
+        " --out {output.page:q} --index {params.index:q} --summary {output.summary:q} > {log:q} 2>&1"
 
 
 rule report_index:
@@ -90,7 +90,7 @@ rule report_index:
     params:
         cli=LIVESCENE,
         # Pages of the sheet's other scenes made by earlier runs (`--config only=...`) are listed too.
-        earlier=lambda w: " ".join(earlier_summaries()),
+        earlier=lambda w: " ".join(q(s) for s in earlier_summaries()),
         pending=lambda w: pending_arg(),
     threads: 1
     resources:
@@ -99,5 +99,5 @@ rule report_index:
     conda:
         ENV
     shell:
-        "{params.cli} report index --summaries {input.summaries} {params.earlier} {params.pending}"
-        " --out {output.index} --csv {output.csv} > {log} 2>&1"
+        "{params.cli} report index --summaries {input.summaries:q} {params.earlier} {params.pending}"
+        " --out {output.index:q} --csv {output.csv:q} > {log:q} 2>&1"

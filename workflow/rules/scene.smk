@@ -25,8 +25,8 @@ rule assemble:
     conda:
         ENV
     shell:
-        "{params.cli} dataset assemble --frames {input.frames} --poses {input.poses} {params.args} --out {output}"
-        " --no-progress > {log} 2>&1"
+        "{params.cli} dataset assemble --frames {input.frames:q} --poses {input.poses:q} {params.args} --out {output:q}"
+        " --no-progress > {log:q} 2>&1"
 
 
 rule scene_validate:
@@ -47,7 +47,7 @@ rule scene_validate:
     conda:
         ENV
     shell:
-        "({params.cli} scene validate {input} && {params.cli} scene info {input} > {output}) > {log} 2>&1"
+        "({params.cli} scene validate {input:q} && {params.cli} scene info {input:q} > {output:q}) > {log:q} 2>&1"
 
 
 rule dataset_orient:
@@ -71,7 +71,7 @@ rule dataset_orient:
     conda:
         ENV
     shell:
-        "{params.cli} dataset orient --data {input.data} --out {output} > {log} 2>&1"
+        "{params.cli} dataset orient --data {input.data:q} --out {output:q} > {log:q} 2>&1"
 
 
 rule exposure:
@@ -92,4 +92,4 @@ rule exposure:
     conda:
         ENV
     shell:
-        "{params.cli} scene exposure {input.data} --out {output} > {log} 2>&1"
+        "{params.cli} scene exposure {input.data:q} --out {output:q} > {log:q} 2>&1"

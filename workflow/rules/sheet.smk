@@ -1,5 +1,6 @@
 # The workflow config and the scene sheet: loaded and validated at workflow start (errors name the
 # file, the line and the column), and the scenes this run builds (config key 'only').
+import csv
 import json
 import shlex
 from pathlib import Path
@@ -41,6 +42,9 @@ def _check_config(cfg):
 
 
 ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
+ITEM_DEFAULTS = {c: yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())["properties"][c].get("default", "")
+                 for c in ITEM_COLUMNS}
+"""The schema's default of each item column: what an empty cell becomes once the sheet is read."""
 
 
 def frames_assembled(kind, poses):
@@ -82,9 +86,10 @@ def _row_problems(record):
                             "holding cameras/images/points3D (.bin or .txt), or one holding sparse/0")
     for column in ITEM_COLUMNS:
         value = record.get(column, "")
-        if value == "yes" and kind in ("video", "images"):
-            problems.append(f"column {column!r}: 'yes' means the source itself holds it (a synthetic capture or "
-                            f"a ready dataset); for a {kind} source write 'no' or the path of the file or folder")
+        if kind in ("video", "images") and (value or ITEM_DEFAULTS[column]) == "yes":
+            empty = "" if value else "is empty or absent, so it takes its default 'yes', which "
+            problems.append(f"column {column!r}: {empty}'yes' means the source itself holds it (a synthetic capture "
+                            f"or a ready dataset); for a {kind} source write 'no' or the path of the file or folder")
         elif value not in ("", "yes", "no") and not Path(value).exists():
             problems.append(f"column {column!r}: {value!r} does not exist; fix: give an existing file or folder, "
                             "or write 'no'")
@@ -116,26 +121,50 @@ def _row_problems(record):
     return problems
 
 
+def _sheet_table(sheet_path):
+    """(DataFrame of str cells, the file line of each row, problems) of a tab-separated sheet.
+
+    Only whole lines whose first cell starts with ``#`` are comments (a ``#`` inside a path is kept) and blank
+    lines are skipped; a row with more cells than the header is a problem rather than a shift of its columns.
+    """
+    text = sheet_path.read_text(encoding="utf-8-sig")  # a spreadsheet's "CSV UTF-8" starts with a BOM
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), 1) if line.strip() and not line.startswith("#")]
+    if not lines:
+        raise WorkflowError(f"{sheet_path}: the scene sheet is empty; fix: write a tab-separated header line and "
+                            "one row per scene (docs/workflow.md, 'The scene sheet')")
+    (_, header_line), *body = lines
+    header = next(csv.reader([header_line], delimiter="\t"))
+    rows, numbers, problems = [], [], []
+    for n, line in body:
+        cells = next(csv.reader([line], delimiter="\t"))
+        if len(cells) > len(header):
+            problems.append(f"line {n}: {len(cells)} tab-separated cells but the header has {len(header)} "
+                            f"columns {header}; fix: remove the extra cells, or name their column in the header")
+            continue
+        rows.append(cells + [""] * (len(header) - len(cells)))
+        numbers.append(n)
+    return pd.DataFrame(rows, columns=header, dtype=str), numbers, problems
+
+
 def _read_scene_sheet(path):
     """Read and validate the scene sheet; errors name the file, the line, the scene and the column."""
     sheet_path = Path(path)
     if not sheet_path.is_file():
         raise WorkflowError(f"{sheet_path}: the scene sheet does not exist; fix: write it (see docs/workflow.md) "
                             "or point config key 'scenes' at it")
-    sheet = pd.read_csv(sheet_path, sep="\t", dtype=str, comment="#", keep_default_na=False)
+    sheet, numbers, problems = _sheet_table(sheet_path)
     schema = yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())
-    problems = []
     unknown = [c for c in sheet.columns if c not in schema["properties"]]
     if unknown:
         problems.append(f"header: unknown column(s) {unknown}; known: {list(schema['properties'])}")
-    for i, row in enumerate(sheet.to_dict("records")):
+    for line, row in zip(numbers, sheet.to_dict("records")):
         record = {k: v for k, v in row.items() if v != "" and k in schema["properties"]}
-        name = row.get("scene") or f"row {i + 1}"
+        name = row.get("scene") or f"line {line}"
         errors = list(jsonschema.Draft202012Validator(schema).iter_errors(record))
         for error in errors:
-            problems.append(f"line {i + 2} (scene {name!r}): {_schema_problem(error)}")
+            problems.append(f"line {line} (scene {name!r}): {_schema_problem(error)}")
         if not errors:
-            problems += [f"line {i + 2} (scene {name!r}): {p}" for p in _row_problems(record)]
+            problems += [f"line {line} (scene {name!r}): {p}" for p in _row_problems(record)]
     dupes = sheet["scene"][sheet["scene"].duplicated()].tolist() if "scene" in sheet else []
     if dupes:
         problems.append(f"column 'scene': duplicate scene name(s) {dupes}")

@@ -28,5 +28,5 @@ rule stability:
         ENV
     shell:
         # Exit status 1 means a case failed: that is a finding for the report, not a broken job.
-        "{params.cli} stability {params.args} --workflow {params.workflow:q} --threads {threads} --out {output}"
-        " > {log} 2>&1 || test -s {output}"
+        "{params.cli} stability {params.args} --workflow {params.workflow:q} --threads {threads} --out {output:q}"
+        " > {log:q} 2>&1 || test -s {output:q}"

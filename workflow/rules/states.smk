@@ -20,4 +20,4 @@ rule states:
     conda:
         ENV
     shell:
-        "{params.cli} states {params.args} --frames {input.frames} --out {output} > {log} 2>&1"
+        "{params.cli} states {params.args} --frames {input.frames:q} --out {output:q} > {log:q} 2>&1"
