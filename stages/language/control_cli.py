@@ -56,6 +56,9 @@ def _parse_states(items: list[str]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError as exc:
             raise InputError("--state", f"{item!r} is not OBJECT=VALUE", "write e.g. --state fridge=0.5") from exc
+        if not 0.0 <= out[name.strip()] <= 1.0:  # NaN fails this too
+            raise InputError("--state", f"{item!r}: {value.strip()} is not in [0, 1] (0 closed, 1 fully open)",
+                             "write e.g. --state fridge=0.5")
     return out
 
 

@@ -10,6 +10,7 @@ authors' code disagree, the field's docstring says which one the default follows
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -436,7 +437,34 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
                 raise InputError("--set", f"{text!r}: {k} is not a section", "name a field inside a section")
         node[keys[-1]] = value
     data.update(top)
-    return from_mapping(RunConfig, data, path=path)
+    config = from_mapping(RunConfig, data, path=path)
+    _check_ranges(config, path)
+    return config
+
+
+TRAIN_RANGES: dict[str, tuple[float, str]] = {
+    "batch_rays": (1, "rays per step, e.g. 4096"), "eval_rays": (1, "held-out rays, e.g. 4096"),
+    "render_chunk": (1, "rays per render pass, e.g. 4096"), "log_every": (1, "steps, e.g. 10"),
+    "checkpoint_every": (1, "steps, e.g. 1000"), "keep_checkpoints": (1, "checkpoints, e.g. 2"),
+    "max_steps": (0, "steps"), "max_seconds": (0, "seconds (0 = no budget)"), "eval_every": (0, "steps (0 = never)"),
+    "warmup_steps": (0, "steps"), "lr_final_ratio": (0, "a ratio, e.g. 0.0"), "threads": (0, "threads (0 = torch's)"),
+    "max_nonfinite": (1, "steps, e.g. 20"),
+}
+"""Least value of each numeric ``train`` field and what it counts: types are checked per source, ranges here."""
+
+
+def _check_ranges(config: RunConfig, preset: Path) -> None:
+    """Refuse a ``train`` value out of its range (a negative batch, a zero chunk, an lr that is not finite)."""
+    for name, (least, what) in TRAIN_RANGES.items():
+        value = getattr(config.train, name)
+        if not math.isfinite(value) or value < least:
+            raise InputError(f"train.{name}", f"{value} is out of range (in {preset} or a --set item)",
+                             f"give {'a positive' if least else 'a non-negative'} number of {what}")
+    for name in ("lr", "adam_eps"):
+        value = getattr(config.train, name)
+        if not (math.isfinite(value) and 0 < value <= 10):
+            raise InputError(f"train.{name}", f"{value} is not a finite value in (0, 10] (in {preset} or a --set "
+                             "item)", "give e.g. train.lr=0.02, train.adam_eps=1e-12")
 
 
 def _check_override(text: str, keys: list[str], value: Any) -> None:

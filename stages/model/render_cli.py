@@ -14,6 +14,7 @@ import yaml
 
 from stages.scene import Camera, InputError, atomic_dir, read_scene
 from stages.scene.cli_errors import cli_errors
+from stages.scene.transforms import parse_pose
 
 from .camera_path import CameraPath, best_view_of, orbit_path, read_camera_path, states_sweep_path
 from .path_video import CODECS, encode_video, frames_dir_for, render_frames
@@ -63,6 +64,9 @@ def _parse_states(items: list[str]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError as exc:
             raise InputError("--state", f"{item!r}: {value!r} is not a number", "write a value in [0, 1]") from exc
+        if not 0.0 <= out[name.strip()] <= 1.0:  # NaN fails this too
+            raise InputError("--state", f"{item!r}: {value.strip()} is not in [0, 1] (0 closed, 1 fully open)",
+                             "write a value in [0, 1]")
     return out
 
 
@@ -76,7 +80,7 @@ def _parse_matrix(text: str) -> np.ndarray:
     except (ValueError, json.JSONDecodeError) as exc:
         raise InputError("--pose-matrix", f"cannot read a 4x4 matrix from {text!r}",
                          "give 16 numbers, row major, or a JSON [[...], ...] list") from exc
-    return m
+    return parse_pose(m, Path("--pose-matrix"), "the camera-to-world matrix")  # finite and rigid, as in a dataset
 
 
 def _write_png(path: Path, img: np.ndarray) -> None:

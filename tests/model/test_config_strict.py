@@ -125,3 +125,17 @@ def test_train_cli_refuses_a_bad_set_value_with_one_line(tmp_path, capsys):
     assert train_main([*args, "--set", "train.mixed_precision=7"]) == 2
     assert "train.mixed_precision is 7" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(("item", "message"), [
+    ("train.batch_rays=0", "train.batch_rays: 0 is out of range"),
+    ("train.render_chunk=-5", "train.render_chunk: -5 is out of range"),
+    ("train.eval_rays=0", "train.eval_rays: 0 is out of range"),
+    ("train.lr=-1", "train.lr: -1.0 is not a finite value in (0, 10]"),
+    ("train.lr=1e30", "train.lr: 1e+30 is not a finite value in (0, 10]"),
+    ("train.max_seconds=.nan", "train.max_seconds: nan is out of range"),
+])
+def test_out_of_range_train_values_are_refused_with_the_fix(item, message):
+    with pytest.raises(InputError) as info:
+        load_config("cpu-demo", [item])
+    assert str(info.value).startswith(message) and "fix: give" in str(info.value)
