@@ -267,6 +267,12 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
                 check_mask_array(arr, src_mask, height, width, len(objects))
                 (tmp / "masks").mkdir(exist_ok=True)
                 shutil.copyfile(src_mask, mask_path(tmp, fid))
+        if config.labels is not None and frames and len(without_masks) == len(frames):
+            raise AssembleError(config.labels / "masks", f"none of the {len(frames)} frames has a mask here "
+                                "(<frame id>.npy, as `livescene labels` writes them)",
+                                "pass the folder `livescene labels --out` wrote (masks/*.npy, mapping.yaml, "
+                                "labels.json), not the annotations it reads; or leave out --labels for a dataset "
+                                "without masks")
         meta: dict[str, Any] = {k: v for k, v in scene_json.items() if k not in ("scene_box",)}
         meta.update({
             "assembled_from": {"frames": str(config.frames), "poses": str(tpath),
@@ -288,5 +294,9 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
             place_image(points, tmp / POINTS_NAME, config.copy_images)
             ds.nerfstudio["ply_file_path"] = POINTS_NAME
         write_scene(ds, tmp)
-        read_scene(tmp, validate=True, deep=True)
+        try:
+            read_scene(tmp, validate=True, deep=True)
+        except SceneError as exc:  # name the file where it will be, not in the temporary folder
+            where = exc.path.relative_to(tmp) if exc.path.is_relative_to(tmp) else exc.path
+            raise AssembleError(config.out / where, exc.problem, exc.fix) from None
     return read_scene(config.out, validate=False)

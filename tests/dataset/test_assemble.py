@@ -200,3 +200,16 @@ def test_an_out_folder_of_other_files_is_kept(tmp_path, capsys):
     code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
                          "--out", str(paths["frames"])])
     assert code == 2 and "is the input" in capsys.readouterr().err
+
+
+def test_a_labels_folder_without_any_ingested_mask_is_refused(tmp_path, capsys):
+    paths = make_stage_outputs(tmp_path)
+    annotations = tmp_path / "annotations"  # what a user has before `livescene labels`: a name table, PNG masks
+    (annotations / "masks").mkdir(parents=True)
+    (annotations / "mapping.yaml").write_text((paths["labels"] / "mapping.yaml").read_text())
+    (annotations / "masks" / "frame_00000.png").write_bytes(b"")
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--labels", str(annotations), "--states", str(paths["states"]), "--out", str(tmp_path / "ds")])
+    err = capsys.readouterr().err
+    assert code == 2 and "none of the" in err and "frames has a mask here" in err and "livescene labels --out" in err
+    assert not (tmp_path / "ds").exists()

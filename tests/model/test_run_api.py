@@ -48,7 +48,8 @@ def test_render_cli_writes_images(trained_run, tiny_dataset, tmp_path, capsys):
     assert render_main(["--run", str(trained_run), "--pose-matrix", matrix, "--out", str(tmp_path / "m")]) == 0
     assert render_main(["--run", str(tmp_path / "none"), "--pose-matrix", matrix, "--out", str(tmp_path / "x")]) == 2
     capsys.readouterr()
-    for bad, message in ((["--state", "object0=nan"], "nan is not in [0, 1]"), (["--state", "object0=5"], "5 is not in"),
+    for bad, message in ((["--state", "object0=nan"], "nan is not in [0, 1]"),
+                         (["--state", "object0=5"], "5 is not in"),
                          (["--pose-matrix", "nan 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1"], "NaN or infinite"),
                          (["--pose-matrix", "0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1"], "not orthonormal")):
         pose = [] if "--pose-matrix" in bad else ["--pose-matrix", matrix]
