@@ -81,7 +81,7 @@ def detect_format(path: Path) -> tuple[str, Path]:
     if not path.is_dir():
         raise LabelError(path, "label input not found", "pass a mask folder or a COCO/LabelMe json file")
     folder = path / "masks" if (path / "masks").is_dir() and _has_labels(path / "masks") else path
-    counts = {ext: len(list(folder.glob(f"*.{ext}"))) for ext in ("npy", "png", "json")}
+    counts = {ext: sum(p.suffix.lower() == f".{ext}" for p in folder.iterdir()) for ext in ("npy", "png", "json")}
     present = [ext for ext, n in counts.items() if n]
     if not present and object_folders(folder):
         return "objects", folder
@@ -99,7 +99,7 @@ def detect_format(path: Path) -> tuple[str, Path]:
 
 
 def _has_labels(folder: Path) -> bool:
-    return (any(folder.glob("*.npy")) or any(folder.glob("*.png")) or any(folder.glob("*.json"))
+    return (any(p.suffix.lower() in (".npy", ".png", ".json") for p in folder.iterdir())
             or bool(object_folders(folder)))
 
 

@@ -19,12 +19,14 @@ from stages.scene import frame_id_of
 from .errors import LabelError
 from .label_set import LabelEntry, LabelMap, LabelSet, paint
 from .name_table import NameTable
-from .png_labels import read_mask_image
+from .png_labels import JPEG_SUFFIXES, png_masks, read_mask_image
 
 
 def object_folders(folder: Path) -> list[Path]:
-    """Subfolders of ``folder`` that hold PNG masks (hidden folders left out)."""
-    return sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".") and any(d.glob("*.png")))
+    """Subfolders of ``folder`` that hold masks (PNG, or JPEG, which reading refuses; hidden folders left out)."""
+    suffixes = (".png", *JPEG_SUFFIXES)
+    return sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")
+                  and any(p.suffix.lower() in suffixes for p in d.iterdir()))
 
 
 def read_object_folder_labels(folder: Path, table: NameTable | None) -> LabelSet:
@@ -43,7 +45,7 @@ def read_object_folder_labels(folder: Path, table: NameTable | None) -> LabelSet
     else:
         names = sorted(folders)
         names_from, ids = f"{folder} (sorted folder names)", tuple(range(1, len(names) + 1))
-    files = {name: {frame_id_of(p.stem): p for p in sorted(folders[name].glob("*.png"))} for name in names}
+    files = {name: {frame_id_of(p.stem): p for p in png_masks(folders[name])} for name in names}
     frames = sorted(set().union(*files.values()))
     partial = {f: [n for n in names if f not in files[n]] for f in frames if any(f not in files[n] for n in names)}
     if partial:

@@ -19,12 +19,25 @@ from .errors import LabelError
 from .label_set import LabelEntry, LabelMap, LabelSet
 from .name_table import NameTable
 
+JPEG_SUFFIXES = (".jpg", ".jpeg")
+
+
+def png_masks(folder: Path) -> list[Path]:
+    """The PNG masks of ``folder`` (``.png`` in any case), sorted; JPEG masks are refused, not skipped."""
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() == ".png")
+    jpegs = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in JPEG_SUFFIXES)
+    if jpegs:
+        named = ", ".join(jpegs[:3]) + (", ..." if len(jpegs) > 3 else "")
+        raise LabelError(folder, f"{len(jpegs)} masks are JPEG ({named}): JPEG's compression bleeds mask edges "
+                         "into other ids", "export the masks as PNG")
+    return files
+
 
 def read_png_labels(folder: Path, table: NameTable) -> LabelSet:
     if 0 in table.ids:
         raise LabelError(table.path or folder, "id 0 names an object, but 0 is background in a PNG id map",
                          "number the objects from 1 (their pixel values)")
-    files = sorted(folder.glob("*.png"))
+    files = png_masks(folder)
     lut = np.zeros(max(max(table.ids) + 1, 65536), dtype=np.uint16)
     known = np.zeros(lut.size, dtype=bool)
     known[0] = True

@@ -222,3 +222,25 @@ def test_object_folders_refuse_a_frame_some_objects_lack_and_names_the_table_lac
     assert labels_main(args) == 2
     err = capsys.readouterr().err
     assert "folders without a name: ['chest']; names without a folder: ['drawer']" in err and not out.exists()
+
+
+def test_jpeg_masks_are_refused_and_upper_case_png_is_read(label_files, capsys):
+    src = _write_object_folders(label_files.root, label_files.labels)
+    for p in (src / "door").iterdir():  # one object's masks exported as JPEG: never silently left out
+        p.rename(p.with_suffix(".jpg"))
+    out = label_files.root / "out"
+    args = ["--input", str(src), "--frames", str(label_files.frames), "--out", str(out), "--no-progress",
+            "--missing-masks", "leave"]
+    assert labels_main(args) == 2
+    err = capsys.readouterr().err
+    assert f"{src / 'door'}: " in err and "masks are JPEG" in err and "export the masks as PNG" in err
+    for p in (src / "door").iterdir():
+        p.rename(p.with_suffix(".PNG"))
+    assert labels_main(args) == 0
+    ingest(write_png(label_files.root, label_files.labels), label_files.frames, label_files.root / "out_grey",
+           missing_masks="leave")
+    reference = read_masks(label_files.root / "out_grey")
+    masks = read_masks(out)
+    assert sorted(masks) == sorted(reference)
+    for fid in reference:
+        np.testing.assert_array_equal(masks[fid], reference[fid])
