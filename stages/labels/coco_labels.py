@@ -33,6 +33,14 @@ def read_coco_labels(path: Path, table: NameTable | None) -> LabelSet:
         except (KeyError, TypeError, ValueError) as exc:
             raise LabelError(path, f"categories[{i}] lacks an integer 'id' or a 'name'",
                              "give every category an id and a name") from exc
+        if not categories[int(cat["id"])].strip():
+            raise LabelError(path, f"categories[{i}] (id {cat['id']}) has an empty name", "name every category")
+    shared = {n: [c for c, m in categories.items() if m == n] for n in categories.values()}
+    shared = {n: ids for n, ids in shared.items() if len(ids) > 1}
+    if shared:
+        name, ids = next(iter(shared.items()))
+        raise LabelError(path, f"categories {ids} share the name {name!r}", "give each object one category (merge "
+                         "their annotations under one id) or distinct names")
     if table is not None:
         names, names_from = table.names, str(table.path)
         unknown = sorted(set(categories.values()) - set(names))
@@ -56,6 +64,11 @@ def read_coco_labels(path: Path, table: NameTable | None) -> LabelSet:
                              "add the category or drop the annotation")
         by_image.setdefault(int(ann["image_id"]), []).append((i, ann))
     entries = []
+    image_ids = {str(img.get("id")) for img in data["images"] if isinstance(img, dict)}
+    for image_id, anns in by_image.items():
+        if str(image_id) not in image_ids:
+            raise LabelError(path, f"annotations[{anns[0][0]}] has image_id {image_id} that no image defines "
+                             f"({len(anns)} annotation(s) would be lost)", "add the image or drop its annotations")
     for j, img in enumerate(data["images"]):
         try:
             image_id, file_name = int(img["id"]), str(img["file_name"])

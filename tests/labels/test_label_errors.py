@@ -70,6 +70,24 @@ def test_coco_bad_rle_size(label_files):
         run(path, label_files.frames, label_files.root / "out")
 
 
+def test_coco_annotations_of_no_image_and_shared_or_empty_category_names_are_refused(label_files):
+    path = write_coco(label_files.root, label_files.labels)
+    good = json.loads(path.read_text())
+    orphan = json.loads(path.read_text())
+    orphan["annotations"][0]["image_id"] = 12345
+    path.write_text(json.dumps(orphan))
+    with pytest.raises(LabelError, match=r"annotations\[0\] has image_id 12345 that no image defines"):
+        run(path, label_files.frames, label_files.root / "out")
+    for extra, message in (({"id": 9, "name": "door"}, r"categories \[\d+, 9\] share the name 'door'"),
+                           ({"id": 9, "name": " "}, r"categories\[\d\] \(id 9\) has an empty name")):
+        doc = json.loads(json.dumps(good))
+        doc["categories"].append(extra)
+        path.write_text(json.dumps(doc))
+        with pytest.raises(LabelError, match=message):
+            run(path, label_files.frames, label_files.root / "out")
+    assert not (label_files.root / "out").exists()
+
+
 def test_mixed_folder_needs_format(label_files):
     src = write_png(label_files.root, label_files.labels)
     np.save(src / "masks" / "00000.npy", np.zeros((2, 2, 4), bool))
