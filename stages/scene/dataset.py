@@ -236,6 +236,11 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
             if not isinstance(state, dict):
                 raise SceneError(tpath, f"{where}: state is not a mapping of object to value",
                                  "write \"state\": {object: value}")
+            words = {str(k): v for k, v in state.items() if isinstance(v, (str, bool)) or v is None}
+            if words:
+                name, value = next(iter(words.items()))
+                raise SceneError(tpath, f"{where}: state of {name!r} is {value!r}, not a number",
+                                 "write each object's state as a number in [0, 1] (0 closed, 1 fully open)")
             state = {str(k): float(v) for k, v in state.items()}
             bad = [k for k, v in state.items() if not np.isfinite(v)]
             if bad:

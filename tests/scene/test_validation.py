@@ -71,6 +71,15 @@ def test_non_finite_pose(tiny_dataset):
     _expect(tiny_dataset.root, "transforms.json", "frames[2]", "NaN or infinite")
 
 
+def test_a_state_written_as_a_word_is_named(tiny_dataset):
+    def word(d):
+        name = next(iter(d["frames"][1]["state"]))
+        d["frames"][1]["state"][name] = "open"
+
+    _edit_transforms(tiny_dataset.root, word)
+    _expect(tiny_dataset.root, "transforms.json", "frames[1]", "is 'open', not a number")
+
+
 def test_non_rigid_pose(tiny_dataset):
     def scale(d):
         m = np.array(d["frames"][1]["transform_matrix"])
