@@ -19,7 +19,7 @@ from .polygon_fill import fill_polygons, polygon_from_flat
 
 def read_coco_labels(path: Path, table: NameTable | None) -> LabelSet:
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, json.JSONDecodeError) as exc:
         raise LabelError(path, f"not readable JSON ({exc})", "re-export the COCO file") from exc
     if not isinstance(data, dict) or not all(isinstance(data.get(k), list) for k in ("images", "annotations",

@@ -105,7 +105,7 @@ def _has_labels(folder: Path) -> bool:
 
 def _peek_json(path: Path) -> object:
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, json.JSONDecodeError) as exc:
         raise LabelError(path, f"not readable JSON ({exc})", "repair or re-export the file") from exc
 

@@ -34,7 +34,7 @@ def is_labelme(data: Any) -> bool:
 
 def _load_json(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, json.JSONDecodeError) as exc:
         raise LabelError(path, f"not readable JSON ({exc})", "re-save the annotation with LabelMe") from exc
     if not is_labelme(data):

@@ -18,8 +18,6 @@ from typing import Any, Literal
 
 import yaml
 
-from stages.scene import frame_id_of
-
 from .errors import StateError
 
 AnnotationFormat = Literal["auto", "livescene", "conerf", "csv"]
@@ -127,10 +125,16 @@ def _source_index(path: Path, row: int, raw: Any) -> int:
         raise StateError(path, f"row {row}: frame {raw!r} is not a frame index", "write the source frame index")
     if isinstance(raw, int):
         index = raw
-    elif isinstance(raw, float) and raw.is_integer():
+    elif isinstance(raw, float):
+        if not raw.is_integer():
+            raise StateError(path, f"row {row}: frame {raw!r} is not a whole frame index", "write the source frame "
+                             "index of the key frame (key frames are frames, not times)")
         index = int(raw)
     else:
-        fid = frame_id_of(Path(str(raw).strip()).stem) if str(raw).strip() else ""
+        text = str(raw).strip()
+        # only an image file's extension is dropped: "10.5" stays "10.5" (not a frame) rather than frame 10
+        stem = Path(text).stem if Path(text).suffix.lower() in (".png", ".jpg", ".jpeg", ".npy") else text
+        fid = stem.rsplit("_", 1)[-1] if text else ""  # the last "_" token, as frame_id_of, without its suffix cut
         if not fid.isdigit():
             raise StateError(path, f"row {row}: frame {raw!r} does not end in a frame number",
                              "name key frames <name>_<source index> (e.g. frame_00012) or give the index")
@@ -189,7 +193,7 @@ def _read_conerf(path: Path, names: dict[int, str], names_path: Path | None) -> 
 
 
 def _read_csv(path: Path) -> list[KeyValue]:
-    with path.open(newline="") as fh:
+    with path.open(newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's "CSV UTF-8" starts with a BOM
         reader = csv.DictReader(fh)
         fields = [f.strip() for f in (reader.fieldnames or [])]
         if not {"frame", "object", "value"} <= set(fields):

@@ -43,6 +43,22 @@ def test_value_that_is_no_number(tmp_path):
         run(tmp_path, keys)
 
 
+def test_a_fractional_frame_is_refused_not_truncated(tmp_path):
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10.5,door,1\n")
+    with pytest.raises(StateError, match=r"keys\.csv: row 3: frame '10\.5' does not end in a frame number"):
+        run(tmp_path, keys)
+    keys = write_text(tmp_path / "key_frame_value.yaml", "0: {door: 0.0}\n2.5: {door: 1.0}\n")
+    with pytest.raises(StateError, match=r"frame 2\.5 is not a whole frame index"):
+        run(tmp_path, keys)
+
+
+def test_a_csv_saved_with_a_byte_order_mark_is_read(tmp_path):
+    keys = tmp_path / "keys.csv"
+    keys.write_bytes("frame,object,value\n0,door,0\n10,door,1\n".encode("utf-8-sig"))
+    summary = run(tmp_path, keys)
+    assert summary["objects"] == ["door"]
+
+
 def test_same_key_frame_with_two_values(tmp_path):
     # two spellings of source frame 10 (zero padding differs), annotated differently
     keys = write_text(tmp_path / "key_frame_value.yaml", """
