@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from stages.scene import InputError, SceneDataset, atomic_path, read_scene, write_json, write_yaml
+from stages.scene import InputError, SceneDataset, SceneError, atomic_path, read_scene, write_json, write_yaml
 from stages.scene.exposure import read_exposure
 from stages.scene.machine import machine_info
 
@@ -219,7 +219,13 @@ class Trainer:
         self.language = LanguageTargets.read(cfg.language_targets, self.ds.objects) if cfg.language_targets else None
         seed_everything(cfg.seed)
         self.norm = SceneNormalization.from_dataset(self.ds)
-        train_frames = self.ds.frames_in("train") or self.ds.frames
+        train_frames = self.ds.frames_in("train")
+        if not train_frames and self.ds.frames_in("test"):  # the evaluation would call trained views held out
+            raise SceneError(self.ds.root / "transforms.json", f"all {len(self.ds.frames_in('test'))} split frames "
+                             "are test frames, so training would use the views the evaluation holds out",
+                             'mark the training frames "split": "train" (or drop the split keys to train on every '
+                             "frame without a held-out evaluation)")
+        train_frames = train_frames or self.ds.frames
         test_frames = self.ds.frames_in("test") or train_frames
         near = cfg.model.sampling.near_plane
         # learned-state mode: rays carry no states, so training AND the periodic evaluation use the learned ones

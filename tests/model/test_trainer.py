@@ -193,3 +193,19 @@ def test_train_cli_errors_and_success(tiny_dataset, tmp_path, capsys, tiny_overr
         args += ["--set", item]
     assert train_main(args) == 0
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["steps"] == 2
+
+
+def test_a_dataset_whose_split_frames_are_all_test_frames_is_refused(tiny_dataset, tmp_path, tiny_config):
+    import shutil
+
+    from stages.scene import SceneError
+
+    root = tmp_path / "ds"
+    shutil.copytree(tiny_dataset.root, root)
+    data = json.loads((root / "transforms.json").read_text())
+    for frame in data["frames"]:
+        frame["split"] = "test"
+    data["test_filenames"] = data.pop("train_filenames", []) + data.get("test_filenames", [])
+    (root / "transforms.json").write_text(json.dumps(data))
+    with pytest.raises(SceneError, match=r"split frames are test frames.*fix: mark the training frames"):
+        Trainer(tiny_config(root, steps=2), tmp_path / "run", device="cpu", progress=False)
