@@ -124,6 +124,8 @@ def _relevancy(args: argparse.Namespace) -> int:
     from .grounding import Grounder
     from .vocabulary import ObjectVocabulary
 
+    if not args.query.strip():
+        raise InputError(Path("QUERY"), "the text query is empty", 'give the words to look for, e.g. "fridge"')
     data = dataset_of_run(args.run, args.data)
     ds = read_scene(data)
     run = open_run(args.run, args.device)
