@@ -96,6 +96,9 @@ def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsy
     assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
                               "--out", str(png), "--source", "language", "thing zero"]) == 2
     assert "renders no language embedding" in capsys.readouterr().err
+    assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
+                              "--out", str(png), " "]) == 2
+    assert "the text query is empty" in capsys.readouterr().err
 
 
 def _run_folder(root, data):
