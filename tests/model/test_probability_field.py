@@ -33,6 +33,18 @@ def test_projection_keeps_state_gradient_and_rejects_unsure_samples():
     assert states.grad[0].tolist() == [1.0, 0.0]
 
 
+def test_static_row_moves_objects_off_the_static_vertex():
+    config = ProbabilityConfig(rejection_threshold=0.6, static_value=0.0, static_row=True)
+    field = ProbabilityField(config, n_objects=2, k_resolution=16)
+    states = torch.tensor([[0.0, 1.0]]).expand(3, 2)
+    logits = torch.tensor([[10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.1, 0.0]])  # closed, open, unsure
+    k, _ = field.project(logits, states)
+    # a closed object reads the second vertex, an open one the last, a rejected (static) sample the first alone
+    assert torch.allclose(k, torch.tensor([1 / 15, 1.0, 0.0]))
+    plain = ProbabilityField(ProbabilityConfig(rejection_threshold=0.6), n_objects=2, k_resolution=16)
+    assert torch.allclose(plain.project(logits, states)[0], torch.tensor([0.0, 1.0, 0.0]))  # one shared row
+
+
 def test_field_learns_regions_from_position():
     """The full field (tri-plane + decoder) fed positions returns alpha + 1 logits per sample."""
     torch.manual_seed(0)

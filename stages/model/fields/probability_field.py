@@ -22,10 +22,12 @@ from ..mlp import mlp
 class ProbabilityField(nn.Module):
     """Positions [N, 3] in [-1, 1] and states [N, alpha] -> logits [N, alpha + 1]."""
 
-    def __init__(self, config: ProbabilityConfig, n_objects: int) -> None:
+    def __init__(self, config: ProbabilityConfig, n_objects: int, k_resolution: int = 2) -> None:
         super().__init__()
         self.config = config
         self.n_objects = n_objects
+        # ``static_row``: where objects' states start on the k axis (the first vertex is the static room's)
+        self.state_floor = 1.0 / (k_resolution - 1) if config.static_row and k_resolution > 1 else 0.0
         r = config.resolution
         self.encoding = KPlanesEncoding([r, r, r], config.channels, None, 3, config.init_range)
         # with state_input "none" the states are not an input: n_inputs = 0
@@ -58,7 +60,8 @@ class ProbabilityField(nn.Module):
 
         ``logits`` [N, alpha + 1], ``states`` [N, alpha] -> (k [N] in [0, 1], u [N] long).
         Samples whose best object probability is under the rejection threshold
-        get the static value. ``k`` keeps the gradient of ``states`` (learned-state mode).
+        get the static value; with ``static_row`` the objects' states are moved off the static value's vertex.
+        ``k`` keeps the gradient of ``states`` (learned-state mode).
         """
         if self.n_objects == 0:  # a static scene: every sample sits at the static value
             z = torch.zeros(logits.shape[0], dtype=torch.long, device=logits.device)
@@ -72,6 +75,8 @@ class ProbabilityField(nn.Module):
                 # softmax_u >= t  <=>  sum_j exp(l_j - l_u) <= 1 / t; overflow gives inf, i.e. "unsure"
                 sure = torch.exp(rows - best).sum(dim=0) <= 1.0 / self.config.rejection_threshold
         k = torch.gather(states, 1, u[:, None])[:, 0]
+        if self.state_floor > 0:
+            k = self.state_floor + (1.0 - self.state_floor) * k
         if self.config.rejection_threshold > 0:
             k = torch.where(sure, k, torch.full_like(k, self.config.static_value))
         return k, u

@@ -84,7 +84,7 @@ class LiveSceneModel(nn.Module):
         if len(config.sampling.num_proposal_samples) != len(self.proposal_fields):
             raise ValueError(f"{len(config.sampling.num_proposal_samples)} proposal sample counts for "
                              f"{len(self.proposal_fields)} proposal fields; give one count per field")
-        self.probability_field = ProbabilityField(config.probability, alpha)
+        self.probability_field = ProbabilityField(config.probability, alpha, fc.k_resolution)
         self.state_field = StateField(config.state, alpha) if config.state.mode == "learned" else None
         self.language_table: LanguageTable | None = None
         if info.language_dim > 0:
