@@ -449,11 +449,11 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
 
 TRAIN_RANGES: dict[str, tuple[float, str]] = {
     "batch_rays": (1, "rays per step, e.g. 4096"), "eval_rays": (1, "held-out rays, e.g. 4096"),
-    "render_chunk": (1, "rays per render pass, e.g. 4096"), "log_every": (1, "steps, e.g. 10"),
-    "checkpoint_every": (1, "steps, e.g. 1000"), "keep_checkpoints": (1, "checkpoints, e.g. 2"),
+    "render_chunk": (1, "rays per render pass, e.g. 4096"), "log_every": (0, "steps, e.g. 10"),
+    "checkpoint_every": (0, "steps (0 = only at the end)"), "keep_checkpoints": (0, "checkpoints, e.g. 2"),
     "max_steps": (0, "steps"), "max_seconds": (0, "seconds (0 = no budget)"), "eval_every": (0, "steps (0 = never)"),
     "warmup_steps": (0, "steps"), "lr_final_ratio": (0, "a ratio, e.g. 0.0"), "threads": (0, "threads (0 = torch's)"),
-    "max_nonfinite": (1, "steps, e.g. 20"),
+    "max_nonfinite": (0, "steps, e.g. 20"),
 }
 """Least value of each numeric ``train`` field and what it counts: types are checked per source, ranges here."""
 
