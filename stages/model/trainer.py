@@ -242,6 +242,13 @@ class Trainer:
             raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
                              "annotate key frames, or set --set model.state.key_frame_every=N")
         self.model = build_model(cfg.method, cfg.model, self.info).to(self.device)
+        if self.ds.n_objects and self.model.field_reads_probabilities and not bool((self.train_rays.labels >= 0).any()):
+            # only the mask losses train the probability field, which places every sample's state (docs/method.md 2)
+            raise SceneError(self.ds.root / "masks", f"the dataset names objects {self.ds.objects} but no training "
+                             f"frame has a mask: {cfg.method}'s probability field, which decides what each object's "
+                             "state moves, would learn nothing", "ingest masks (`livescene labels`, then `livescene "
+                             "dataset assemble --labels`), or train a method that reads every state everywhere "
+                             "(--method mk-planes)")
         if cfg.train.compile:
             compile_fields(self.model, cfg.train.compile_mode)
         # compiled fields' CUDA graph replays overwrite their last outputs: each step starts a new generation of them

@@ -209,3 +209,16 @@ def test_a_dataset_whose_split_frames_are_all_test_frames_is_refused(tiny_datase
     (root / "transforms.json").write_text(json.dumps(data))
     with pytest.raises(SceneError, match=r"split frames are test frames.*fix: mark the training frames"):
         Trainer(tiny_config(root, steps=2), tmp_path / "run", device="cpu", progress=False)
+
+
+def test_objects_without_any_mask_are_refused_for_livescene(tiny_dataset, tmp_path, tiny_config):
+    import shutil
+
+    from stages.scene import SceneError
+
+    root = tmp_path / "ds"
+    shutil.copytree(tiny_dataset.root, root)
+    shutil.rmtree(root / "masks")
+    with pytest.raises(SceneError, match=r"names objects .* but no training frame has a mask.*fix: ingest masks"):
+        Trainer(tiny_config(root, steps=2), tmp_path / "run", device="cpu", progress=False)
+    Trainer(tiny_config(root, "method=mk-planes", steps=2), tmp_path / "mk", device="cpu", progress=False)
