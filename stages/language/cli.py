@@ -130,10 +130,7 @@ def _relevancy(args: argparse.Namespace) -> int:
     ds = read_scene(data)
     run = open_run(args.run, args.device)
     frames = ds.frames_in("test") or ds.frames
-    frame = next((f for f in ds.frames if f.frame_id == args.frame), None) if args.frame else frames[0]
-    if frame is None:
-        raise InputError(Path(data) / "transforms.json", f"no frame with id {args.frame!r}",
-                         "pick a frame id of the dataset")
+    frame = ds.frame_by_id(args.frame) if args.frame else frames[0]
     grounder = Grounder(ObjectVocabulary.from_prompts(ds.objects, ds.prompts, Path(data) / "prompts.yaml"),
                         encoder_from_args(args))
     out = run.render(ds.camera_of(frame), frame.c2w, frame.state, frame_index=ds.frames.index(frame))

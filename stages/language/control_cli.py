@@ -113,10 +113,7 @@ def _control(args: argparse.Namespace) -> int:
 
         ds = read_scene(data)
         frames = ds.frames_in("test") or ds.frames
-        frame = next((f for f in ds.frames if f.frame_id == args.frame), None) if args.frame else frames[0]
-        if frame is None:
-            raise InputError(Path(data) / "transforms.json", f"no frame with id {args.frame!r}",
-                             "pick a frame id of the dataset")
+        frame = ds.frame_by_id(args.frame) if args.frame else frames[0]
     elif args.from_frame or args.frame:
         raise InputError("--from-frame/--frame", "a frame needs a scene dataset, and none was given",
                          "pass --data DS or --run RUN instead of --objects, or the starting states with --state")

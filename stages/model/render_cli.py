@@ -172,10 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError("--pose", f"{args.pose!r} is not PATH:FRAME_ID", "write e.g. DS/transforms.json:00012")
         root = Path(spec).parent if Path(spec).name == "transforms.json" else Path(spec)
         ds = read_scene(root)
-        frame = next((f for f in ds.frames if f.frame_id == fid), None)
-        if frame is None:
-            raise InputError(root / "transforms.json", f"no frame with id {fid!r}",
-                             "pick a frame id of the dataset")
+        frame = ds.frame_by_id(fid)
         camera, c2w = ds.camera_of(frame), frame.c2w
         if [f.frame_id for f in ds.frames] == run.frame_ids:
             frame_index = ds.frames.index(frame)

@@ -35,9 +35,7 @@ def render_sweeps(run_dir: str | Path, data_dir: str | Path, out_dir: str | Path
         raise InputError("--scale", f"{scale} is not in (0, 1]", "pass a resolution factor such as 0.5")
     ds = read_scene(data_dir)
     frames = ds.frames_in("test") or ds.frames
-    frame = frames[0] if frame_id is None else next((f for f in ds.frames if f.frame_id == frame_id), None)
-    if frame is None:
-        raise InputError(Path(data_dir) / "transforms.json", f"no frame with id {frame_id!r}", "pick a frame id")
+    frame = frames[0] if frame_id is None else ds.frame_by_id(frame_id)
     run = load_run(run_dir, device=device)
     camera = ds.camera_of(frame).scaled(scale) if scale != 1 else ds.camera_of(frame)
     base = {name: float((frame.state or {}).get(name, 0.0)) for name in run.objects}

@@ -152,6 +152,19 @@ class SceneDataset:
                 return None
             raise
 
+    def frame_by_id(self, frame_id: str) -> Frame:
+        """The frame whose id (the last ``_`` token of its image name) is ``frame_id``; an unknown id is refused,
+        showing the ids the dataset has (and the id an image name given instead would have)."""
+        found = next((f for f in self.frames if f.frame_id == frame_id), None)
+        if found is None:
+            ids = [f.frame_id for f in self.frames]
+            own = frame_id_of(frame_id)
+            hint = f" (an image name? its id is {own!r})" if own != frame_id and own in ids else ""
+            shown = ", ".join(ids[:4]) + (f", ... ({len(ids)} frames)" if len(ids) > 4 else "")
+            raise SceneError(self.root / "transforms.json", f"no frame with id {frame_id!r}{hint}",
+                             f"pick one of the dataset's frame ids: {shown}")
+        return found
+
     def frames_in(self, split: str) -> list[Frame]:
         return [f for f in self.frames if (f.split or "train") == split]
 

@@ -56,6 +56,11 @@ def test_render_cli_writes_images(trained_run, tiny_dataset, tmp_path, capsys):
         assert render_main(["--run", str(trained_run), *pose, *bad, "--out", str(tmp_path / "bad")]) == 2
         assert message in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+    bad = ["--run", str(trained_run), "--pose", f"{tiny_dataset.root}/transforms.json:frame_00001", "--out", str(out)]
+    assert render_main(bad) == 2
+    err = capsys.readouterr().err
+    assert "no frame with id 'frame_00001' (an image name? its id is '00001')" in err
+    assert "fix: pick one of the dataset's frame ids: 00000, 00001" in err
 
 
 def test_a_model_of_an_older_format_is_refused_with_the_fix(trained_run, tmp_path):
