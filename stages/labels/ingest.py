@@ -18,6 +18,7 @@ confidence/, confidence.csv and propagation.json), left without masks ("leave") 
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -160,6 +161,10 @@ def ingest_labels(config: LabelsConfig) -> dict:
             raise LabelError(entry.source, f"frame {fid} is labelled twice (also by {matched[fid]})",
                              "keep one annotation per frame")
         matched[fid] = entry.source
+    if unmatched and matched:  # recorded in labels.json too; said here because a typo in a name looks the same
+        shown = ", ".join(unmatched[:3]) + (", ..." if len(unmatched) > 3 else "")
+        print(f"{config.input}: {len(unmatched)} label file(s) match no extracted frame of {frames.root} and are left "
+              f"out ({shown}); names must end in a frame's source index", file=sys.stderr)
     if not matched:
         raise LabelError(config.input, f"none of the {len(label_set.entries)} labelled frames matches a frame of "
                          f"{frames.root} (ids like {frames.frame_ids[:3]})",
@@ -252,4 +257,8 @@ def ingest_labels(config: LabelsConfig) -> dict:
             })
             write_json(tmp / "propagation.json", result.report)
         write_json(tmp / "labels.json", summary)
+    unseen = [n for n in names if not any(per_frame[f]["pixels"][n] for f in per_frame)]
+    if unseen:  # the mask ids or the name table do not match, or the object never shows
+        print(f"{config.input}: no mask shows {unseen} in any frame: {'it' if len(unseen) == 1 else 'they'} cannot be "
+              "located (check the masks' ids against the name table)", file=sys.stderr)
     return summary

@@ -244,3 +244,19 @@ def test_jpeg_masks_are_refused_and_upper_case_png_is_read(label_files, capsys):
     assert sorted(masks) == sorted(reference)
     for fid in reference:
         np.testing.assert_array_equal(masks[fid], reference[fid])
+
+
+def test_files_of_no_frame_and_objects_no_mask_shows_are_said_on_stderr(label_files, capsys):
+    import shutil
+
+    src = write_png(label_files.root, label_files.labels)
+    first = sorted((src / "masks").iterdir())[0]
+    shutil.copyfile(first, src / "masks" / "mask.png")  # no frame number: matches no frame
+    table = yaml.safe_load((src / "mapping.yaml").read_text())
+    table[250] = "oven"  # named, but no mask has its id
+    (src / "mapping.yaml").write_text(yaml.safe_dump(table))
+    summary = ingest(src, label_files.frames, label_files.root / "out", missing_masks="leave")
+    err = capsys.readouterr().err
+    assert "1 label file(s) match no extracted frame" in err and "mask.png" in err
+    assert "no mask shows ['oven'] in any frame" in err
+    assert summary["labels_without_frame"] == [str(src / "masks" / "mask.png")]
