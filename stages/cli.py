@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import warnings
 from pathlib import Path
 
 # subcommand -> (module holding main(argv), one-line help)
@@ -72,8 +73,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f"livescene: unknown command {name!r}\n\n{usage(commands)}", file=sys.stderr)
         return 2
     use_passive_openmp_wait()
+    warnings.formatwarning = _one_line_warning
     module = importlib.import_module(commands[name][0])
     return int(module.main(rest) or 0)
+
+
+def _one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                      line: str | None = None) -> str:
+    """A warning as a CLI says it: ``warning: <text>`` (the project's warnings name the file and the fix), not
+    Python's source location and line."""
+    return f"warning: {message}\n" if issubclass(category, UserWarning) else \
+        f"{filename}:{lineno}: {category.__name__}: {message}\n"
 
 
 def use_passive_openmp_wait() -> None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -295,7 +296,11 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
             ds.nerfstudio["ply_file_path"] = POINTS_NAME
         write_scene(ds, tmp)
         try:
-            read_scene(tmp, validate=True, deep=True)
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
+                read_scene(tmp, validate=True, deep=True)
+            for w in said:  # e.g. states clamped to [0, 1]: named where the file will be
+                warnings.warn(str(w.message).replace(str(tmp), str(config.out)), w.category, stacklevel=2)
         except SceneError as exc:  # name the file where it will be, not in the temporary folder
             where = exc.path.relative_to(tmp) if exc.path.is_relative_to(tmp) else exc.path
             raise AssembleError(config.out / where, exc.problem, exc.fix) from None

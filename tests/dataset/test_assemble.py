@@ -213,3 +213,25 @@ def test_a_labels_folder_without_any_ingested_mask_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "none of the" in err and "frames has a mask here" in err and "livescene labels --out" in err
     assert not (tmp_path / "ds").exists()
+
+
+def test_a_clamping_warning_names_the_output_not_the_temporary_folder(tmp_path):
+    import pandas as pd
+
+    paths = make_stage_outputs(tmp_path)
+    table = pd.read_csv(paths["states"] / "states.csv")  # long form: frame, source_index, object, value, ...
+    table.loc[1, "value"] = 1.5
+    table.to_csv(paths["states"] / "states.csv", index=False)
+    out = tmp_path / "ds"
+    with pytest.warns(UserWarning, match="clamped") as caught:
+        assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], states=paths["states"], out=out,
+                                      progress=False))
+    text = " ".join(str(w.message) for w in caught)
+    assert str(out / "transforms.json") in text and ".ds." not in text
+
+
+def test_the_cli_says_a_warning_in_one_line():
+    from stages.cli import _one_line_warning
+
+    assert _one_line_warning(UserWarning("ds/transforms.json: states clamped; fix: ..."), UserWarning, "x.py", 3,
+                             "warnings.warn(...)") == "warning: ds/transforms.json: states clamped; fix: ...\n"
