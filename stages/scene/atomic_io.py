@@ -90,7 +90,10 @@ def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Pat
                              "choose another --out, outside the inputs")
     if not path.exists() and not path.is_symlink():
         return
-    if not path.is_dir() or path.is_symlink():
+    if path.is_symlink():  # replacing it would drop the link and leave its target as it was: say so instead
+        raise InputError(path, f"is a symbolic link; the {stage} stage writes a folder here",
+                         "give the folder the link points to as --out, or another --out")
+    if not path.is_dir():
         raise InputError(path, f"exists and is not a folder; the {stage} stage writes a folder here",
                          "choose another --out, or move that file away")
     if force or not any(path.iterdir()):

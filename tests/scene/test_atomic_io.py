@@ -87,10 +87,14 @@ def test_an_input_or_a_folder_holding_one_is_refused(tmp_path):
     guard_output_dir(source / "frames", "frames", inputs=[source])  # a new folder inside an input is fine
 
 
-def test_a_file_in_the_way_is_refused(tmp_path):
+def test_a_file_or_a_link_in_the_way_is_refused(tmp_path):
     (tmp_path / "out").write_text("x")
     with pytest.raises(InputError, match="is not a folder"):
         guard_output_dir(tmp_path / "out", "frames")
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    with pytest.raises(InputError, match="is a symbolic link"):
+        guard_output_dir(tmp_path / "link", "frames")
 
 
 def test_a_file_output_that_names_a_folder_is_refused(tmp_path):
