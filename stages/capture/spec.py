@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -262,7 +263,8 @@ def spec_to_dict(spec: CaptureSpec) -> dict[str, Any]:
 
 
 def _vec(value: Any, n: int, path: Path, where: str, positive: bool = False) -> None:
-    ok = isinstance(value, list | tuple) and len(value) == n and all(isinstance(v, int | float) for v in value)
+    ok = isinstance(value, list | tuple) and len(value) == n and all(
+        isinstance(v, int | float) and math.isfinite(v) for v in value)
     if not ok:
         raise CaptureSpecError(path, f"{where} is {value!r}, expected {n} numbers", f"write {where}: [{n} numbers]")
     if positive and any(v <= 0 for v in value):

@@ -264,7 +264,11 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
                 if not src_mask.is_file():
                     without_masks.append(fid)
                     continue
-                arr = np.load(src_mask, mmap_mode="r", allow_pickle=False)
+                try:
+                    arr = np.load(src_mask, mmap_mode="r", allow_pickle=False)
+                except (ValueError, OSError, EOFError) as exc:
+                    raise AssembleError(src_mask, f"cannot read the mask ({exc})",
+                                        "re-run `livescene labels` to write it again") from exc
                 check_mask_array(arr, src_mask, height, width, len(objects))
                 (tmp / "masks").mkdir(exist_ok=True)
                 shutil.copyfile(src_mask, mask_path(tmp, fid))

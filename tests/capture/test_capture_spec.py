@@ -48,6 +48,7 @@ def test_the_specs_the_tests_and_the_stability_suite_use_load(small_spec):
                                                             "use only ['interpolation', 'keys']"]),
     (lambda d: d.update(name=2024), ["spec.name is 2024 (an integer), expected a string", "in quotes: '2024'"]),
     (lambda d: d.update(objects={"cabinet": {}}), ["spec.objects is", "expected a list of mappings of ObjectSpec"]),
+    (lambda d: d["objects"][0].update(position=[0.0, float("nan"), 0.0]), [".position is [0.0, nan, 0.0], expected 3"]),
 ])
 def test_wrong_types_name_the_file_and_the_key(tmp_path, edit, words):
     data = yaml.safe_load((PRESETS / "tiny.yaml").read_text())

@@ -235,3 +235,14 @@ def test_the_cli_says_a_warning_in_one_line():
 
     assert _one_line_warning(UserWarning("ds/transforms.json: states clamped; fix: ..."), UserWarning, "x.py", 3,
                              "warnings.warn(...)") == "warning: ds/transforms.json: states clamped; fix: ...\n"
+
+
+def test_a_truncated_mask_is_named(tmp_path, capsys):
+    paths = make_stage_outputs(tmp_path)
+    mask = sorted((paths["labels"] / "masks").glob("*.npy"))[0]
+    mask.write_bytes(mask.read_bytes()[:90])
+    code = dataset_main(["assemble", "--frames", str(paths["frames"]), "--poses", str(paths["poses"]),
+                         "--labels", str(paths["labels"]), "--states", str(paths["states"]),
+                         "--out", str(tmp_path / "ds")])
+    err = capsys.readouterr().err
+    assert code == 2 and f"{mask}: cannot read the mask" in err and "re-run `livescene labels`" in err
