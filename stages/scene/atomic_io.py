@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Iterator, Sequence
@@ -60,6 +61,30 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def _remove_orphans(path: Path) -> None:
+    """Delete the temporary siblings of ``path`` that a killed run left (their writer's process is gone).
+
+    A SIGTERM between ``mkdtemp`` and the swap leaves ``.<name>.<pid>.<random>`` behind (a video's frames: hundreds
+    of MB); a live writer of the same output, which Snakemake never starts twice, keeps its own.
+    """
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.(?:old\.)?[a-z0-9_]{{8}}$")
+    for sibling in path.parent.iterdir():
+        m = pattern.match(sibling.name)
+        if m and sibling.is_dir() and not sibling.is_symlink() and int(m.group(1)) != os.getpid() \
+                and not _alive(int(m.group(1))):
+            shutil.rmtree(sibling, ignore_errors=True)
 
 
 def _marker_stage(folder: Path) -> str | None:
@@ -118,13 +143,15 @@ def atomic_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path] = (
     path = Path(path)
     guard_output_dir(path, stage, inputs=inputs, legacy=legacy, force=force)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    _remove_orphans(path)
+    # the writer's pid in the name: a later run can tell a killed run's leftovers from a live one's work
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", dir=path.parent))
     try:
         yield tmp
         (tmp / STAGE_MARKER).write_text(stage + "\n")
         _publish_mode(tmp, directory=True)
         if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.old.", dir=path.parent))
             old.rmdir()
             os.replace(path, old)
             os.replace(tmp, path)

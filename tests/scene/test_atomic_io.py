@@ -102,3 +102,22 @@ def test_a_file_output_that_names_a_folder_is_refused(tmp_path):
     with pytest.raises(InputError, match="is a folder, and this output is a file"):
         write_json(tmp_path / "adir", {"x": 1})
     assert list((tmp_path / "adir").iterdir()) == []
+
+
+def test_a_killed_runs_temporary_folder_is_removed_by_the_next_run(tmp_path):
+    import subprocess
+    import sys
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(gone.stdout)
+    orphan = tmp_path / f".frames.{dead}.abcd1234"  # what a SIGTERM before the swap leaves
+    (orphan / "images").mkdir(parents=True)
+    (orphan / "images" / "frame_00000.png").write_bytes(b"x" * 1000)
+    live = tmp_path / f".frames.{os.getppid()}.wxyz5678"  # another writer, still running
+    live.mkdir()
+    mine = tmp_path / ".frames.backup"  # the user's own, whatever its name says
+    mine.mkdir()
+    with atomic_dir(tmp_path / "frames", "frames") as tmp:
+        (tmp / "frames.json").write_text("{}")
+    assert not orphan.exists() and live.is_dir() and mine.is_dir()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, mine.name, "frames"])
