@@ -43,6 +43,11 @@ def main(argv: list[str] | None = None) -> int:
     ds = read_scene(args.path, validate=True, deep=getattr(args, "deep", False))
     if args.command == "validate":
         print(f"{args.path}: valid scene dataset, {len(ds.frames)} frames, objects {ds.objects}")
+        if ds.objects and not ds.has_masks:  # valid, but not for every method: say which
+            print(f"warning: {ds.root / 'mapping.yaml'}: names objects {ds.objects} but the dataset has no masks/: "
+                  "LiveScene and CoNeRF-style refuse it (only masks train their probability field) and no grounding "
+                  "can be evaluated; MK-Planes trains on it; fix: ingest masks (`livescene labels`, then "
+                  "`livescene dataset assemble --labels`)", file=sys.stderr)
     elif args.command == "exposure":
         est = estimate_exposure(ds)
         if args.out:

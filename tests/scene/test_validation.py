@@ -134,7 +134,19 @@ def test_validate_cli_ok(tiny_dataset):
     proc = subprocess.run([sys.executable, "-m", "stages.scene", "validate", str(tiny_dataset.root)],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    assert "6 frames" in proc.stdout
+    assert "6 frames" in proc.stdout and "warning" not in proc.stderr
+
+
+def test_validate_cli_says_which_methods_a_dataset_without_masks_serves(tiny_dataset, tmp_path):
+    import shutil
+
+    root = tmp_path / "ds"
+    shutil.copytree(tiny_dataset.root, root)
+    shutil.rmtree(root / "masks")
+    proc = subprocess.run([sys.executable, "-m", "stages.scene", "validate", str(root)], capture_output=True,
+                          text=True)
+    assert proc.returncode == 0 and "valid scene dataset" in proc.stdout
+    assert "has no masks/: LiveScene and CoNeRF-style refuse it" in proc.stderr and "fix: ingest masks" in proc.stderr
 
 
 def test_states_outside_unit_range_are_clamped_with_a_warning_naming_the_frame(tiny_dataset):
