@@ -239,7 +239,7 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
     splits = make_split(len(use), config.split, n=config.split_n, test_fraction=config.test_fraction)
     used_ids = {fid for fid, _ in use}
     without_masks: list[str] = []
-    inputs = [p for p in (config.frames, config.poses, config.labels, config.states) if p]
+    inputs = [config.frames, config.poses, config.labels, config.states]
     with atomic_dir(config.out, "dataset", inputs=inputs, legacy=["scene.json"]) as tmp:
         (tmp / "images").mkdir()
         frames: list[Frame] = []

@@ -200,7 +200,7 @@ def ingest_labels(config: LabelsConfig) -> dict:
         return {f: [n for n, s in zip(names, row, strict=True) if s] for f, row in zip(ids, small, strict=True)
                 if row.any()}
 
-    with atomic_dir(config.out, "labels", inputs=[p for p in (config.input, config.frames, config.mapping) if p],
+    with atomic_dir(config.out, "labels", inputs=[config.input, config.frames, config.mapping],
                     legacy=["labels.json"]) as tmp:
         order = [f for f in frames.frame_ids if f in matched]
         for fid in tqdm(order, desc="labels", unit="frame", disable=not config.progress):

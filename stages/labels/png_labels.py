@@ -24,8 +24,9 @@ JPEG_SUFFIXES = (".jpg", ".jpeg")
 
 def png_masks(folder: Path) -> list[Path]:
     """The PNG masks of ``folder`` (``.png`` in any case), sorted; JPEG masks are refused, not skipped."""
-    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() == ".png")
-    jpegs = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in JPEG_SUFFIXES)
+    entries = [p for p in folder.iterdir() if p.is_file()]
+    files = sorted(p for p in entries if p.suffix.lower() == ".png")
+    jpegs = sorted(p.name for p in entries if p.suffix.lower() in JPEG_SUFFIXES)
     if jpegs:
         named = ", ".join(jpegs[:3]) + (", ..." if len(jpegs) > 3 else "")
         raise LabelError(folder, f"{len(jpegs)} masks are JPEG ({named}): JPEG's compression bleeds mask edges "

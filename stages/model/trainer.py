@@ -219,14 +219,14 @@ class Trainer:
         self.language = LanguageTargets.read(cfg.language_targets, self.ds.objects) if cfg.language_targets else None
         seed_everything(cfg.seed)
         self.norm = SceneNormalization.from_dataset(self.ds)
-        train_frames = self.ds.frames_in("train")
-        if not train_frames and self.ds.frames_in("test"):  # the evaluation would call trained views held out
-            raise SceneError(self.ds.root / "transforms.json", f"all {len(self.ds.frames_in('test'))} split frames "
-                             "are test frames, so training would use the views the evaluation holds out",
+        train_frames, held_out = self.ds.frames_in("train"), self.ds.frames_in("test")
+        if not train_frames and held_out:  # the evaluation would call trained views held out
+            raise SceneError(self.ds.root / "transforms.json", f"all {len(held_out)} split frames are test frames, "
+                             "so training would use the views the evaluation holds out",
                              'mark the training frames "split": "train" (or drop the split keys to train on every '
                              "frame without a held-out evaluation)")
         train_frames = train_frames or self.ds.frames
-        test_frames = self.ds.frames_in("test") or train_frames
+        test_frames = held_out or train_frames
         near = cfg.model.sampling.near_plane
         # learned-state mode: rays carry no states, so training AND the periodic evaluation use the learned ones
         given = mode == "given"

@@ -316,7 +316,7 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
                              "write the poses to another folder")
     timings: dict[str, float] = {}
     warnings_: list[str] = []
-    with atomic_dir(cfg.out_dir, "poses", inputs=[p for p in (cfg.model_dir, cfg.images_dir, cfg.frames_dir) if p],
+    with atomic_dir(cfg.out_dir, "poses", inputs=[cfg.model_dir, cfg.images_dir, cfg.frames_dir],
                     legacy=["poses.json"]) as out:
         t0 = time.perf_counter()
         rec = read_model(located)

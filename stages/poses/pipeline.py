@@ -74,7 +74,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         motion_holder["motion"] = feature_motion(database)
         check_motion(motion_holder["motion"], diagonal, cfg.static_motion_fraction, cfg.frames_dir)
 
-    with atomic_dir(cfg.out_dir, "poses", inputs=[p for p in (cfg.frames_dir, cfg.masks_dir) if p],
+    with atomic_dir(cfg.out_dir, "poses", inputs=[cfg.frames_dir, cfg.masks_dir],
                     legacy=["poses.json"]) as out:
         work = out / "colmap_work"
         work.mkdir()

@@ -95,19 +95,19 @@ def _marker_stage(folder: Path) -> str | None:
         return None
 
 
-def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path] = (),
+def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path | None] = (),
                      legacy: Sequence[str] = (), force: bool = False) -> None:
     """Refuse an output folder whose replacement would delete something that is not ``stage``'s own output.
 
     A stage's output folder is replaced as a whole, so ``path`` may only be absent, empty, or an earlier output
     of the same stage: it holds ``STAGE_MARKER`` naming ``stage`` (or, written before the marker existed, one of
     the ``legacy`` record files and no marker), or anything when the user asked for it (``force``, a CLI's
-    ``--force``). It may never be one of the stage's ``inputs`` or a folder that holds one. Call it before long
-    work, so that a bad ``--out`` fails at once; ``atomic_dir`` calls it again.
+    ``--force``). It may never be one of the stage's ``inputs`` (None: an optional one not given) or a folder that
+    holds one. Call it before long work, so that a bad ``--out`` fails at once; ``atomic_dir`` calls it again.
     """
     path = Path(path)
     target = path.resolve()
-    for item in inputs:
+    for item in filter(None, inputs):
         src = Path(item).resolve()
         if src == target or target in src.parents:
             what = "is the input" if src == target else "holds the input"
@@ -133,7 +133,7 @@ def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Pat
 
 
 @contextlib.contextmanager
-def atomic_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path] = (),
+def atomic_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path | None] = (),
                legacy: Sequence[str] = (), force: bool = False) -> Iterator[Path]:
     """Yield a temporary folder next to ``path``; swap it into place on success.
 

@@ -170,7 +170,7 @@ def compute_states(config: StatesConfig) -> dict:
                                              if scored else None)
     table = pd.DataFrame(rows, columns=["frame", "source_index", "object", "value", "is_key_frame"])
     key_yaml = {frames.stem_of(i): normalised_keys[i] for i in sorted(normalised_keys)}
-    with atomic_dir(config.out, "states", inputs=[p for p in (config.key_frames, config.frames, config.mapping) if p],
+    with atomic_dir(config.out, "states", inputs=[config.key_frames, config.frames, config.mapping],
                     legacy=["states.json"]) as tmp:
         table.to_csv(tmp / "states.csv", index=False)
         write_yaml(tmp / "key_frame_value.yaml", key_yaml)

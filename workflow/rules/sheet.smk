@@ -42,8 +42,9 @@ def _check_config(cfg):
 
 
 ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
-ITEM_DEFAULTS = {c: yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())["properties"][c].get("default", "")
-                 for c in ITEM_COLUMNS}
+SCENE_SCHEMA = yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())
+"""The scene sheet's JSON schema (workflow/schemas/scenes.schema.yaml), read once."""
+ITEM_DEFAULTS = {c: SCENE_SCHEMA["properties"][c].get("default", "") for c in ITEM_COLUMNS}
 """The schema's default of each item column: what an empty cell becomes once the sheet is read."""
 
 
@@ -153,7 +154,7 @@ def _read_scene_sheet(path):
         raise WorkflowError(f"{sheet_path}: the scene sheet does not exist; fix: write it (see docs/workflow.md) "
                             "or point config key 'scenes' at it")
     sheet, numbers, problems = _sheet_table(sheet_path)
-    schema = yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())
+    schema = SCENE_SCHEMA
     unknown = [c for c in sheet.columns if c not in schema["properties"]]
     if unknown:
         problems.append(f"header: unknown column(s) {unknown}; known: {list(schema['properties'])}")

@@ -22,12 +22,13 @@ from ..mlp import mlp
 class ProbabilityField(nn.Module):
     """Positions [N, 3] in [-1, 1] and states [N, alpha] -> logits [N, alpha + 1]."""
 
-    def __init__(self, config: ProbabilityConfig, n_objects: int, k_resolution: int = 2) -> None:
+    def __init__(self, config: ProbabilityConfig, n_objects: int, k_resolution: int | None = None) -> None:
         super().__init__()
         self.config = config
         self.n_objects = n_objects
-        # ``static_row``: where objects' states start on the k axis (the first vertex is the static room's)
-        self.state_floor = 1.0 / (k_resolution - 1) if config.static_row and k_resolution > 1 else 0.0
+        # ``static_row``: where objects' states start on the k axis (the first vertex is the static room's); the
+        # k resolution is the radiance field's, which the model passes
+        self.state_floor = 1.0 / (k_resolution - 1) if config.static_row and k_resolution and k_resolution > 1 else 0.0
         r = config.resolution
         self.encoding = KPlanesEncoding([r, r, r], config.channels, None, 3, config.init_range)
         # with state_input "none" the states are not an input: n_inputs = 0
