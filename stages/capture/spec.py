@@ -271,6 +271,27 @@ def _vec(value: Any, n: int, path: Path, where: str, positive: bool = False) -> 
         raise CaptureSpecError(path, f"{where} is {value!r}, all values must be > 0", "use positive sizes")
 
 
+def _inside_room(room: list[float], position: list[float], size: list[float], yaw_deg: float, path: Path,
+                 where: str) -> None:
+    """A box (footprint centre at its bottom face, [width, depth, height], yaw) must stand inside the room: one
+    outside it, or through a wall, is hidden by the walls or cut by them, and its masks and states then describe
+    nothing the camera sees."""
+    half_w, half_d = size[0] / 2, size[1] / 2
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    reach_x = abs(c) * half_w + abs(s) * half_d  # half extents of the yawed footprint along x and y
+    reach_y = abs(s) * half_w + abs(c) * half_d
+    eps = 1e-6  # flush against a wall or on the floor is inside
+    lo = (position[0] - reach_x, position[1] - reach_y, position[2])
+    hi = (position[0] + reach_x, position[1] + reach_y, position[2] + size[2])
+    if (any(v < -r / 2 - eps for v, r in zip(lo[:2], room[:2], strict=True)) or lo[2] < -eps
+            or any(v > r / 2 + eps for v, r in zip(hi[:2], room[:2], strict=True)) or hi[2] > room[2] + eps):
+        box = ", ".join(f"{a:.3g}..{b:.3g}" for a, b in zip(lo, hi, strict=True))
+        raise CaptureSpecError(
+            path, f"{where} spans x, y, z = {box} m, outside the room ({-room[0] / 2:.3g}..{room[0] / 2:.3g}, "
+            f"{-room[1] / 2:.3g}..{room[1] / 2:.3g}, 0..{room[2]:.3g})",
+            "move it inside the room (its position is the centre of its footprint's bottom face) or make it smaller")
+
+
 def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     """Reject specs that cannot be rendered, naming the key and the fix."""
     path = Path(path)
@@ -308,6 +329,7 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
                                    f"use one of {HINGES[o.kind]}")
         _vec(o.position, 3, path, f"{where}.position")
         _vec(o.size, 3, path, f"{where}.size", positive=True)
+        _inside_room(spec.room, o.position, o.size, o.yaw_deg, path, where)
         if o.limits is not None:
             _vec(o.limits, 2, path, f"{where}.limits")
         if not 0 < o.thickness < 0.5 * min(o.size):
@@ -330,6 +352,7 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     for i, f in enumerate(spec.furniture):
         _vec(f.position, 3, path, f"furniture[{i}].position")
         _vec(f.size, 3, path, f"furniture[{i}].size", positive=True)
+        _inside_room(spec.room, f.position, f.size, f.yaw_deg, path, f"furniture[{i}] ({f.name})")
     c = spec.camera
     if c.kind not in CAMERA_KINDS:
         raise CaptureSpecError(path, f"camera.kind {c.kind!r} unknown", f"use one of {CAMERA_KINDS}")

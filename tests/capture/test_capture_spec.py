@@ -61,3 +61,42 @@ def test_wrong_types_name_the_file_and_the_key(tmp_path, edit, words):
     assert message.startswith(f"{path}: ") and "; fix: " in message
     for word in words:
         assert word in message, (word, message)
+
+
+def _inside(data: dict, what: str, i: int, **fields) -> None:
+    data[what][i].update(fields)
+
+
+@pytest.mark.parametrize(("edit", "words"), [
+    (lambda d: _inside(d, "objects", 0, position=[9.0, 0.0, 0.0]), ["objects[0] (cabinet)", "outside the room"]),
+    (lambda d: _inside(d, "objects", 0, position=[0.0, 0.0, -0.3]), ["objects[0]", "outside the room"]),
+    (lambda d: _inside(d, "objects", 0, size=[0.4, 0.4, 9.0]), ["objects[0]", "outside the room"]),
+    (lambda d: d["furniture"].append({"name": "sofa", "position": [0.0, 0.0, 0.0], "size": [40.0, 1.0, 1.0]}),
+     ["furniture[", "(sofa)", "outside the room"]),
+])
+def test_an_object_or_furniture_outside_the_room_is_refused(tmp_path, edit, words):
+    data = yaml.safe_load((PRESETS / "tiny.yaml").read_text())
+    edit(data)
+    path = tmp_path / "outside.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(CaptureSpecError) as info:
+        load_spec(path)
+    message = str(info.value)
+    assert "move it inside the room" in message
+    for word in words:
+        assert word in message, (word, message)
+
+
+def test_a_yawed_object_flush_against_a_wall_is_inside():
+    data = yaml.safe_load((PRESETS / "tiny.yaml").read_text())
+    half_x = data["room"][0] / 2
+    # 0.4 wide, 0.2 deep, turned 90 degrees: 0.1 of it reaches along x, so its centre may sit 0.1 from the wall
+    data["objects"][0].update(position=[half_x - 0.1, 0.0, 0.0], size=[0.4, 0.2, 0.5], yaw_deg=90.0)
+    assert load_spec_data(data).objects[0].yaw_deg == 90.0
+    data["objects"][0]["position"][0] += 0.01
+    with pytest.raises(CaptureSpecError, match="outside the room"):
+        load_spec_data(data)
+
+
+def load_spec_data(data: dict) -> CaptureSpec:
+    return spec_from_dict(data, "inside.yaml")
