@@ -49,9 +49,10 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     if path.is_dir():
         raise InputError(path, "is a folder, and this output is a file", "give a file name (e.g. inside that folder)")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp", dir=path.parent
-    )
+    suffix = suffix or path.suffix or ".tmp"
+    _remove_orphans(path, suffix=suffix)
+    # the writer's pid in the name, as atomic_dir's: a later write can tell a killed run's leftover
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=suffix, dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -73,18 +74,25 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _remove_orphans(path: Path) -> None:
+def _remove_orphans(path: Path, suffix: str | None = None) -> None:
     """Delete the temporary siblings of ``path`` that a killed run left (their writer's process is gone).
 
     A SIGTERM between ``mkdtemp`` and the swap leaves ``.<name>.<pid>.<random>`` behind (a video's frames: hundreds
-    of MB); a live writer of the same output, which Snakemake never starts twice, keeps its own.
+    of MB), and one inside ``atomic_path`` a file ``.<name>.<pid>.<random><suffix>``; a live writer of the same
+    output, which Snakemake never starts twice, keeps its own. ``suffix`` None: folders, else files.
     """
-    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.(?:old\.)?[a-z0-9_]{{8}}$")
-    for sibling in path.parent.iterdir():
-        m = pattern.match(sibling.name)
-        if m and sibling.is_dir() and not sibling.is_symlink() and int(m.group(1)) != os.getpid() \
-                and not _alive(int(m.group(1))):
-            shutil.rmtree(sibling, ignore_errors=True)
+    tail = r"(?:old\.)?[a-z0-9_]{8}" if suffix is None else r"[a-z0-9_]{8}" + re.escape(suffix)
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.{tail}$")
+    prefix = f".{path.name}."
+    with os.scandir(path.parent) as entries:
+        orphans = [e for e in entries if e.name.startswith(prefix) and (m := pattern.match(e.name))
+                   and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1)))
+                   and (e.is_dir(follow_symlinks=False) if suffix is None else e.is_file(follow_symlinks=False))]
+    for entry in orphans:
+        if suffix is None:
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            Path(entry.path).unlink(missing_ok=True)
 
 
 def _marker_stage(folder: Path) -> str | None:

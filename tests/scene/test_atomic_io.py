@@ -3,6 +3,7 @@ the old output untouched, and a folder that is not the same stage's output (or i
 
 from __future__ import annotations
 
+import json
 import os
 import stat
 
@@ -121,3 +122,23 @@ def test_a_killed_runs_temporary_folder_is_removed_by_the_next_run(tmp_path):
         (tmp / "frames.json").write_text("{}")
     assert not orphan.exists() and live.is_dir() and mine.is_dir()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, mine.name, "frames"])
+
+
+def test_a_killed_runs_temporary_file_is_removed_by_the_next_write(tmp_path):
+    import subprocess
+    import sys
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(gone.stdout)
+    orphan = tmp_path / f".metrics.json.{dead}.abcd1234.json"  # what a SIGTERM inside atomic_path leaves
+    orphan.write_text("{")
+    live = tmp_path / f".metrics.json.{os.getppid()}.wxyz5678.json"  # another writer, still running
+    live.write_text("{")
+    other = tmp_path / f".other.json.{dead}.abcd1234.json"  # a temporary of another output: not this write's
+    other.write_text("{")
+    folder = tmp_path / f".metrics.json.{dead}.abcd9999.json"  # a folder of that name is nobody's temporary file
+    folder.mkdir()
+    write_json(tmp_path / "metrics.json", {"psnr": 1.0})
+    assert not orphan.exists() and live.is_file() and other.is_file() and folder.is_dir()
+    assert json.loads((tmp_path / "metrics.json").read_text()) == {"psnr": 1.0}
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, folder.name, "metrics.json"])
