@@ -6,11 +6,11 @@ Each ``--states`` string is one combination; objects it does not name stay close
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Sequence
 
 from stages.scene import InputError
+from stages.scene.state_values import split_assignment, state_value
 
 _SLUG_UNSAFE = re.compile(r"[^A-Za-z0-9.-]+")
 
@@ -30,31 +30,20 @@ def parse_state_string(text: str, objects: Sequence[str], where: str = "--states
         if "=" not in item:
             raise InputError(where, f"{item!r} in {text!r} is not OBJECT=VALUE",
                              f'write e.g. --states "{objects[0] if objects else "fridge"}=1"')
-        name, _, value = (s.strip() for s in item.partition("="))
+        name, value = split_assignment(item, where)
         if name == "all" and name not in objects:
             if every is not None:
                 raise InputError(where, f"'all' is given twice in {text!r}", "give all=VALUE once")
-            every = _state_value(item, value, where)
+            every = state_value(item, value, where)
             continue
         if name not in objects:
             raise InputError(where, f"unknown object {name!r} in {text!r}", f"use one of {list(objects)}")
         if name in out:
             raise InputError(where, f"object {name!r} is given twice in {text!r}", "name each object once")
-        out[name] = _state_value(item, value, where)
+        out[name] = state_value(item, value, where)
     if every is not None:
         out = {name: out.get(name, every) for name in objects}
     return out
-
-
-def _state_value(item: str, value: str, where: str) -> float:
-    try:
-        v = float(value)
-    except ValueError as exc:
-        raise InputError(where, f"{item!r}: {value!r} is not a number", "write a value in [0, 1]") from exc
-    if not math.isfinite(v) or not 0.0 <= v <= 1.0:
-        raise InputError(where, f"{item!r}: state {value} is outside [0, 1]",
-                         "0 is closed, 1 fully open; write a value in between")
-    return v
 
 
 def full_state(states: dict[str, float], objects: Sequence[str]) -> dict[str, float]:

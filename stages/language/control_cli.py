@@ -23,6 +23,7 @@ import yaml
 from stages.scene import InputError, SceneDataset
 from stages.scene.cli_errors import cli_errors
 from stages.scene.dataset import STATE_SEEN_WITHIN
+from stages.scene.state_values import parse_state_assignments
 
 from .cli import add_encoder_arguments, encoder_from_args
 
@@ -44,22 +45,6 @@ def build_parser(prog: str = "livescene control") -> argparse.ArgumentParser:
                    help="resolve objects by name, synonym and spelling only (no text model is loaded)")
     add_encoder_arguments(p)
     return p
-
-
-def _parse_states(items: list[str]) -> dict[str, float]:
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError
-            out[name.strip()] = float(value)
-        except ValueError as exc:
-            raise InputError("--state", f"{item!r} is not OBJECT=VALUE", "write e.g. --state fridge=0.5") from exc
-        if not 0.0 <= out[name.strip()] <= 1.0:  # NaN fails this too
-            raise InputError("--state", f"{item!r}: {value.strip()} is not in [0, 1] (0 closed, 1 fully open)",
-                             "write e.g. --state fridge=0.5")
-    return out
 
 
 def _beyond_training(ds: SceneDataset, states: dict[str, float]) -> dict[str, dict[str, Any]]:
@@ -120,7 +105,7 @@ def _control(args: argparse.Namespace) -> int:
     current = dict.fromkeys(vocabulary.objects, 0.0)
     if args.from_frame and frame is not None and frame.state:
         current.update({k: v for k, v in frame.state.items() if k in current})
-    current.update(_parse_states(args.state))
+    current.update(parse_state_assignments(args.state))
     result = parser.parse(args.command, current)
     report = result.to_json(vocabulary.objects)
     report["command"] = args.command

@@ -14,6 +14,7 @@ import yaml
 
 from stages.scene import Camera, InputError, atomic_dir, read_scene
 from stages.scene.cli_errors import cli_errors
+from stages.scene.state_values import parse_state_assignments
 from stages.scene.transforms import parse_pose
 
 from .camera_path import CameraPath, best_view_of, orbit_path, read_camera_path, states_sweep_path
@@ -54,22 +55,6 @@ def build_parser(prog: str = "livescene render") -> argparse.ArgumentParser:
     return p
 
 
-def _parse_states(items: list[str]) -> dict[str, float]:
-    out = {}
-    for item in items:
-        if "=" not in item:
-            raise InputError("--state", f"{item!r} is not OBJECT=VALUE", "write e.g. --state fridge=1")
-        name, value = item.split("=", 1)
-        try:
-            out[name.strip()] = float(value)
-        except ValueError as exc:
-            raise InputError("--state", f"{item!r}: {value!r} is not a number", "write a value in [0, 1]") from exc
-        if not 0.0 <= out[name.strip()] <= 1.0:  # NaN fails this too
-            raise InputError("--state", f"{item!r}: {value.strip()} is not in [0, 1] (0 closed, 1 fully open)",
-                             "write a value in [0, 1]")
-    return out
-
-
 def _parse_matrix(text: str) -> np.ndarray:
     try:
         if text.strip().startswith("["):
@@ -102,7 +87,7 @@ def _made_path_camera(args: argparse.Namespace, camera):
 
 
 def _video_path(args: argparse.Namespace, run: LoadedRun) -> CameraPath:
-    defaults = _parse_states(args.state)
+    defaults = parse_state_assignments(args.state)
     unknown = sorted(set(defaults) - set(run.objects))
     if unknown:
         raise InputError("--state", f"unknown objects {unknown}", f"use {run.objects}")
@@ -180,8 +165,8 @@ def main(argv: list[str] | None = None) -> int:
         c2w = _parse_matrix(args.pose_matrix)
         data = args.data or run.config.data
         camera = read_scene(data, validate=False).camera
-    out = run.render(camera, c2w, _parse_states(args.state) or None, frame_index=frame_index)
-    state = run.state_vector(_parse_states(args.state) or None, frame_index)
+    out = run.render(camera, c2w, parse_state_assignments(args.state) or None, frame_index=frame_index)
+    state = run.state_vector(parse_state_assignments(args.state) or None, frame_index)
     with atomic_dir(args.out, "render", inputs=[args.run], legacy=["render.yaml"]) as tmp:
         _write_png(tmp / "rgb.png", out["rgb"])
         depth = out["depth"]

@@ -157,7 +157,7 @@ def test_cli_exports_a_real_run_in_each_format(tiny_trained_run, tiny_capture_da
     ("fridge=1", r"unknown object 'fridge'.*fix: use one of \['cabinet', 'drawer'\]"),
     ("cabinet", r"'cabinet' in 'cabinet' is not OBJECT=VALUE"),
     ("cabinet=open", r"'open' is not a number"),
-    ("cabinet=1.5", r"state 1.5 is outside \[0, 1\]"),
+    ("cabinet=1.5", r"state 1.5 is not in \[0, 1\]"),
     ("cabinet=1,cabinet=0", r"object 'cabinet' is given twice"),
 ])
 def test_cli_explains_bad_state_strings(tiny_trained_run, tmp_path, capsys, states, message):
@@ -223,5 +223,5 @@ def test_all_sets_every_object_the_string_does_not_name():
     assert parse_state_string("all=0.5", ["all", "drawer"]) == {"all": 0.5}
     with pytest.raises(InputError, match="'all' is given twice"):
         parse_state_string("all=1,all=0", objects)
-    with pytest.raises(InputError, match=r"outside \[0, 1\]"):
+    with pytest.raises(InputError, match=r"not in \[0, 1\]"):
         parse_state_string("all=2", objects)

@@ -47,7 +47,7 @@ def test_control_errors_exit_2_with_candidates(capsys):
     assert control_cli.main(["--objects", "fridge", "--no-encoder", "--state", "fridge", "open all"]) == 2
     assert "OBJECT=VALUE" in capsys.readouterr().err
     assert control_cli.main(["--objects", "fridge", "--no-encoder", "--state", "fridge=nan", "open all"]) == 2
-    assert "'fridge=nan': nan is not in [0, 1]" in capsys.readouterr().err
+    assert "'fridge=nan': state nan is not in [0, 1]" in capsys.readouterr().err
     assert control_cli.main(["--no-encoder", "open all"]) == 2
     assert "no object names" in capsys.readouterr().err
 

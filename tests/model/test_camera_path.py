@@ -184,4 +184,4 @@ def test_orbit_and_state_sweep_shortcuts(trained_run, tmp_path, monkeypatch, cap
     assert "unknown object 'fridge'" in capsys.readouterr().err
     bad = ["--run", str(trained_run), "--orbit", "--state", "object0=2", "--out", str(tmp_path / "y.mp4")]
     assert render_main(bad) == 2
-    assert "'object0=2': 2 is not in [0, 1]" in capsys.readouterr().err
+    assert "'object0=2': state 2 is not in [0, 1]" in capsys.readouterr().err
