@@ -13,6 +13,7 @@ windows and source indices of the other frames stay where they were.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stages.scene import frame_id_of
+from stages.scene import frame_number_of
 
 from .errors import FrameSourceError
 from .integrity import DecoderReport, StderrCapture, decode_image
@@ -204,18 +205,28 @@ class ImageFolderSource:
 
     def __init__(self, path: Path, fps: float | None = None) -> None:
         self.path = Path(path)
-        files = [p for p in self.path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+        # hidden files are no frames: macOS leaves ``._IMG_0001.jpg`` (its metadata) beside every photo it copies
+        files = [p for p in self.path.iterdir()
+                 if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")]
         if not files:
             raise FrameSourceError(self.path, f"the folder holds no images ({', '.join(IMAGE_SUFFIXES)})",
                                    "pass a video file or a folder of frames")
-        ids = [frame_id_of(p.stem) for p in files]
-        numbered = all(i.isdigit() for i in ids) and len({int(i) for i in ids}) == len(ids)
+        numbers = [frame_number_of(p.stem) for p in files]
+        numbered = all(n is not None for n in numbers)
         if numbered:
-            pairs = sorted(zip((int(i) for i in ids), files, strict=True))
+            first: dict[int, Path] = {}
+            for n, p in zip(numbers, files, strict=True):
+                if n in first:
+                    a, b = sorted((first[n].name, p.name))
+                    raise FrameSourceError(self.path, f"two images carry frame number {n} ({a}, {b})",
+                                           "keep one image per frame number (the number in a name orders the "
+                                           "frames)")
+                first[n] = p
+            pairs = sorted(zip(numbers, files, strict=True))
             self.files = [p for _, p in pairs]
-            self.indices = [i for i, _ in pairs]
-        else:  # no usable number in the names: playback order = name order
-            self.files = sorted(files)
+            self.indices = [int(i) for i, _ in pairs]
+        else:  # some names carry no number: playback order = name order, numbers in names compared as numbers
+            self.files = sorted(files, key=_natural_key)
             self.indices = list(range(len(files)))
         self.numbered = numbered
         self.remarks: tuple[str, ...] = ()
@@ -245,6 +256,12 @@ class ImageFolderSource:
                                            f"frames are {shape[1]}x{shape[0]}", "give frames of one camera at one size")
                 yield SourceFrame(position=position, source_index=index, timestamp=stamp, image=image,
                                   remarks=remarks, where=str(path))
+
+
+def _natural_key(path: Path) -> list[tuple[int, int | str]]:
+    """``img2.png`` before ``img10.png``: digit runs compared as numbers, the rest as case-folded text."""
+    return [(0, int(part)) if part.isdigit() else (1, part.casefold())
+            for part in re.split(r"(\d+)", path.name) if part]
 
 
 def open_source(path: Path, fps: float | None = None) -> VideoSource | ImageFolderSource:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from stages.scene import frame_id_of
+from stages.scene import frame_number_of
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,8 @@ def scaled_size(width: int, height: int, factor: int) -> tuple[int, int]:
 
 
 def indices_named_in(folder: Path) -> frozenset[int]:
-    """Source indices that files in ``folder`` name (a numeric frame id, the last ``_`` token of the stem:
-    frame_00012.png, 0012.npy, IMG_0012.png), as image folders and the labels stage read them."""
-    ids = (frame_id_of(path.stem) for path in Path(folder).iterdir() if path.is_file())
-    return frozenset(int(i) for i in ids if i.isdigit())
+    """Source indices that files in ``folder`` name (``frame_number_of``: frame_00012.png, 0012.npy, IMG_0012.png,
+    img12.png), as image folders and the labels stage read them; hidden files left out."""
+    numbers = (frame_number_of(path.stem) for path in Path(folder).iterdir()
+               if path.is_file() and not path.name.startswith("."))
+    return frozenset(n for n in numbers if n is not None)

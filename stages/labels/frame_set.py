@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import pandas as pd
 
-from stages.scene import frame_id_of
+from stages.scene import frame_id_of, frame_number_of
 
 from .errors import LabelError
 
@@ -40,12 +40,12 @@ class FrameSet:
         return [self.root / n for n in self.image_names]
 
     def match(self, label_id: str) -> str | None:
-        """The frame a label's id refers to: same id, or same number when zero padding differs."""
+        """The frame a label's id refers to: same id, or the same number (``frame_number_of``) when zero padding or
+        the name's form differs (``IMG_4``, ``img4``, ``0004`` all name frame 4)."""
         if label_id in self._ids:
             return label_id
-        if label_id.isdigit():
-            return self._by_number.get(int(label_id))
-        return None
+        number = frame_number_of(label_id)
+        return None if number is None else self._by_number.get(number)
 
 
 def read_frame_set(frames_dir: str | Path) -> FrameSet:
@@ -61,7 +61,8 @@ def read_frame_set(frames_dir: str | Path) -> FrameSet:
             raise LabelError(csv, "no 'frame' column", "write frames.csv with `livescene frames`")
         names = [str(n) for n in table["frame"]]
     else:
-        names = sorted(p.name for p in image_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        names = sorted(p.name for p in image_dir.iterdir()
+                       if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
     if not names:
         raise LabelError(image_dir, "no images (.png/.jpg) found", "extract frames with `livescene frames` first")
     first = image_dir / names[0]

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 import pycolmap
 
-from stages.scene import InputError, atomic_dir, frame_id_of, write_json
+from stages.scene import InputError, atomic_dir, frame_number_of, write_json
 
 from .colmap_files import binary_file_problem, text_file_problem
 from .errors import PoseQualityError
@@ -221,8 +221,7 @@ def fit_cameras(rec: pycolmap.Reconstruction, sizes: dict[int, tuple[int, int, s
 
 
 def _frame_number(name: str) -> int | None:
-    fid = frame_id_of(Path(name).stem)
-    return int(fid) if fid.isdigit() else None
+    return frame_number_of(Path(name).stem)
 
 
 @dataclass

@@ -13,7 +13,7 @@ from .atomic_io import (
 from .camera import Camera, generate_rays, look_at, opencv_to_opengl, opengl_to_opencv, project_points
 from .dataset import Frame, SceneDataset, read_scene, validate_scene, write_scene
 from .errors import InputError, SceneError
-from .keyframes import frame_id_of, read_key_frames, write_key_frames
+from .keyframes import frame_id_of, frame_number_of, read_key_frames, write_key_frames
 from .masks import label_map_to_onehot, onehot_to_label_map, read_mask, write_mask
 from .normalization import (
     apply_similarity_to_points,
@@ -36,6 +36,7 @@ __all__ = [
     "atomic_path",
     "box_to_unit_transform",
     "frame_id_of",
+    "frame_number_of",
     "generate_rays",
     "guard_output_dir",
     "label_map_to_onehot",

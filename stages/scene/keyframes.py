@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 from .atomic_io import write_yaml
@@ -13,6 +14,20 @@ from .yaml_io import read_yaml_mapping
 def frame_id_of(stem: str) -> str:
     """Frame id = last ``_``-separated token of an image stem (LiveScene convention)."""
     return Path(stem).stem.rsplit("_", 1)[-1]
+
+
+_LAST_DIGITS = re.compile(r"(\d+)\D*$")
+
+
+def frame_number_of(stem: str) -> int | None:
+    """The frame number a file name carries: its frame id when that is all digits (``IMG_0012`` -> 12), else the
+    last run of digits in the stem (``img12``, ``frame-12``, ``DSC-0012`` -> 12, as a camera or an export names
+    them); None when the name has no digit."""
+    fid = frame_id_of(stem)
+    if fid.isdigit():
+        return int(fid)
+    m = _LAST_DIGITS.search(Path(stem).stem)
+    return int(m.group(1)) if m else None
 
 
 def read_key_frames(path: Path, object_names: list[str] | None = None) -> dict[str, dict[str, float]]:

@@ -80,6 +80,53 @@ def test_image_folder_with_gaps_and_downscale(tmp_path: Path) -> None:
     assert not (folder / "frames.csv").exists()  # the input folder is left alone
 
 
+@pytest.mark.parametrize("name", ["img{}.jpg", "IMG_{}.JPG", "frame-{}.png", "DSC-{:04d}.jpg"])
+def test_image_folder_numbers_are_read_from_any_name_form(tmp_path: Path, name: str) -> None:
+    """``img1 .. img12`` are frames 1 .. 12 in that order (not 1, 10, 11, 12, 2, ...); macOS's ``._`` copies are
+    no frames."""
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    frames = make_frames(12, set())
+    for i in range(1, 13):
+        cv2.imwrite(str(folder / name.format(i)), frames[i - 1])
+    (folder / ("._" + name.format(1))).write_bytes(b"Mac OS X        ")  # AppleDouble metadata
+    out = tmp_path / "frames"
+    assert main(["--video", str(folder), "--out", str(out), "--no-progress"]) == 0
+    table = read_table(out)
+    assert table["source_index"].tolist() == list(range(1, 13))
+    for i in (1, 2, 10, 12):  # each written frame is the photo of its number
+        got = cv2.imread(str(out / "images" / f"frame_{i:05d}.png")).astype(float)
+        errors = [np.abs(got - f).mean() for f in frames]
+        assert int(np.argmin(errors)) == i - 1, (i, errors)
+    assert not (out / "frames_dropped.csv").exists() or "._" not in (out / "frames_dropped.csv").read_text()
+
+
+def test_image_folder_names_without_numbers_are_taken_in_natural_order(tmp_path: Path) -> None:
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    frames = make_frames(4, set())
+    for pos, stem in enumerate(["a9", "a10", "b", "c"]):  # "a10" sorts before "a9" as text
+        cv2.imwrite(str(folder / f"{stem}.png"), frames[pos])
+    out = tmp_path / "frames"
+    assert main(["--video", str(folder), "--out", str(out), "--no-progress"]) == 0
+    assert read_table(out)["source_index"].tolist() == [0, 1, 2, 3]
+    got = cv2.imread(str(out / "images" / "frame_00001.png")).astype(float)
+    assert int(np.argmin([np.abs(got - f).mean() for f in frames])) == 1  # a10 second
+
+
+def test_two_images_with_one_frame_number_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    frames = make_frames(2, set())
+    cv2.imwrite(str(folder / "IMG_1.jpg"), frames[0])
+    cv2.imwrite(str(folder / "IMG_1.png"), frames[0])
+    cv2.imwrite(str(folder / "IMG_2.jpg"), frames[1])
+    code, err = run_cli(capsys, "--video", str(folder), "--out", str(tmp_path / "frames"))
+    assert code == 2
+    assert "two images carry frame number 1 (IMG_1.jpg, IMG_1.png)" in err and "fix: keep one image" in err
+    assert not (tmp_path / "frames").exists()
+
+
 @given(n=st.integers(1, 300), k=st.integers(1, 60), by_count=st.booleans())
 def test_windows_cover_the_source_in_order(n: int, k: int, by_count: bool) -> None:
     rule = WindowRule.from_options(n, k if by_count else None, None if by_count else k)
