@@ -82,7 +82,7 @@ def detect_format(path: Path) -> tuple[str, Path]:
     if not path.is_dir():
         raise LabelError(path, "label input not found", "pass a mask folder or a COCO/LabelMe json file")
     folder = path / "masks" if (path / "masks").is_dir() and _has_labels(path / "masks") else path
-    counts = {ext: sum(p.suffix.lower() == f".{ext}" for p in folder.iterdir()) for ext in ("npy", "png", "json")}
+    counts = {ext: sum(p.suffix.lower() == f".{ext}" for p in _visible(folder)) for ext in ("npy", "png", "json")}
     present = [ext for ext, n in counts.items() if n]
     if not present and object_folders(folder):
         return "objects", folder
@@ -92,15 +92,20 @@ def detect_format(path: Path) -> tuple[str, Path]:
                          "pass --format npy|png|coco|labelme|objects")
     ext = present[0]
     if ext == "json":
-        jsons = sorted(folder.glob("*.json"))
+        jsons = sorted(p for p in folder.glob("*.json") if not p.name.startswith("."))
         if len(jsons) == 1 and not is_labelme(_peek_json(jsons[0])):
             return "coco", jsons[0]
         return "labelme", folder
     return ext, folder
 
 
+def _visible(folder: Path) -> list[Path]:
+    """The folder's entries but hidden ones (macOS's ``._`` copies, ``.DS_Store``)."""
+    return [p for p in folder.iterdir() if not p.name.startswith(".")]
+
+
 def _has_labels(folder: Path) -> bool:
-    return (any(p.suffix.lower() in (".npy", ".png", ".json") for p in folder.iterdir())
+    return (any(p.suffix.lower() in (".npy", ".png", ".json") for p in _visible(folder))
             or bool(object_folders(folder)))
 
 
@@ -115,7 +120,7 @@ def open_label_set(config: LabelsConfig) -> LabelSet:
     """Read the source's name table and list its labelled frames (nothing rasterised yet)."""
     fmt, where = detect_format(config.input) if config.format == "auto" else (config.format, config.input)
     if fmt == "coco" and where.is_dir():
-        jsons = sorted(where.glob("*.json"))
+        jsons = sorted(p for p in where.glob("*.json") if not p.name.startswith("."))
         if len(jsons) != 1:
             raise LabelError(where, f"{len(jsons)} .json files; COCO needs exactly one", "pass the COCO file itself")
         where = jsons[0]
@@ -134,7 +139,7 @@ def open_label_set(config: LabelsConfig) -> LabelSet:
     if fmt == "objects":
         return read_object_folder_labels(where, table)
     if fmt == "labelme":
-        files = [where] if where.is_file() else sorted(where.glob("*.json"))
+        files = [where] if where.is_file() else sorted(p for p in where.glob("*.json") if not p.name.startswith("."))
         if not files:
             raise LabelError(where, "no LabelMe .json files", "save the annotations with LabelMe into this folder")
         return read_labelme_labels(files, table)

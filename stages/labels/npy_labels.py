@@ -14,7 +14,7 @@ from .name_table import NameTable
 
 
 def read_npy_labels(folder: Path, table: NameTable) -> LabelSet:
-    files = sorted(folder.glob("*.npy"))
+    files = sorted(p for p in folder.glob("*.npy") if not p.name.startswith("."))  # no macOS ``._`` copies
     n = len(table.names)
     entries = [LabelEntry(frame_id_of(f.stem), str(f), _loader(f, n)) for f in files]
     return LabelSet("npy", table.names, str(table.path), table.ids, entries)

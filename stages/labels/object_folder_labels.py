@@ -1,7 +1,8 @@
 """One folder of binary masks per object: ``<input>/<object name>/frame_00012.png``.
 
 What a segmenter run once per object leaves (a text-prompted segmenter asked for "fridge", then for "drawer"):
-each PNG is that object's mask in one frame, any non-zero pixel (grey, colour or palette) being the object. The
+each PNG is that object's mask in one frame, any non-zero pixel (grey, colour or palette) being the object, or,
+in a PNG that uses transparency (a cut-out), any opaque pixel. The
 folder names are the object names; a ``mapping.yaml`` beside the folders fixes their order (its names must be the
 folders'), otherwise the sorted folder names do. A frame is read only where every object has a mask for it (an
 empty mask says "not visible"); a frame some objects have and others lack is refused, since a missing file could
@@ -14,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from stages.scene import frame_id_of
+from stages.scene import frame_id_of, frame_number_of
+from stages.scene.mask_images import object_region
 
 from .errors import LabelError
 from .label_set import LabelEntry, LabelMap, LabelSet, paint
@@ -45,7 +47,7 @@ def read_object_folder_labels(folder: Path, table: NameTable | None) -> LabelSet
     else:
         names = sorted(folders)
         names_from, ids = f"{folder} (sorted folder names)", tuple(range(1, len(names) + 1))
-    files = {name: {frame_id_of(p.stem): p for p in png_masks(folders[name])} for name in names}
+    files = {name: _by_frame(folders[name]) for name in names}
     frames = sorted(set().union(*files.values()))
     partial = {f: [n for n in names if f not in files[n]] for f in frames if any(f not in files[n] for n in names)}
     if partial:
@@ -58,13 +60,26 @@ def read_object_folder_labels(folder: Path, table: NameTable | None) -> LabelSet
     return LabelSet("objects", tuple(names), names_from, tuple(ids), entries)
 
 
+def _by_frame(folder: Path) -> dict[str, Path]:
+    """An object's masks keyed on their frame: its number where the name has one, so that folders padded or named
+    differently (``frame_00004.png``, ``IMG_4.png``) pair up; two masks of one frame are refused."""
+    out: dict[str, Path] = {}
+    for path in png_masks(folder):
+        number = frame_number_of(path.stem)
+        key = str(number) if number is not None else frame_id_of(path.stem)
+        if key in out:
+            raise LabelError(folder, f"two masks name frame {key} ({out[key].name}, {path.name})",
+                             "keep one mask per frame in each object's folder")
+        out[key] = path
+    return out
+
+
 def _loader(paths: list[Path]):
     def load() -> LabelMap:
         canvas: np.ndarray | None = None
         overlap = 0
         for index, path in enumerate(paths, start=1):
-            mask = read_mask_image(path)
-            region = (mask != 0).any(axis=-1) if mask.ndim == 3 else mask != 0
+            region = object_region(read_mask_image(path))
             if canvas is None:
                 canvas = np.zeros(region.shape, np.uint16)
             elif region.shape != canvas.shape:

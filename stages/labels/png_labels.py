@@ -1,19 +1,19 @@
 """PNG id maps: one image per frame, pixel value 0 = background, k = the object whose id is k in the name table.
 
 A palette PNG (mode "P": DAVIS's format, what video object segmenters such as XMem, Cutie and SAM 2's video
-predictor write) holds the id as the palette index; OpenCV would decode it into the palette's colours, so it is
-read through Pillow, which keeps the indices.
+predictor write) holds the id as the palette index, read as such (``stages.scene.mask_images``); an alpha
+channel (grey + alpha, RGBA) holds no id and is left out.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
-from PIL import Image
 
 from stages.scene import frame_id_of
+from stages.scene.mask_images import colour_channels
+from stages.scene.mask_images import read_mask_image as read_stored_mask
 
 from .errors import LabelError
 from .label_set import LabelEntry, LabelMap, LabelSet
@@ -24,7 +24,7 @@ JPEG_SUFFIXES = (".jpg", ".jpeg")
 
 def png_masks(folder: Path) -> list[Path]:
     """The PNG masks of ``folder`` (``.png`` in any case), sorted; JPEG masks are refused, not skipped."""
-    entries = [p for p in folder.iterdir() if p.is_file()]
+    entries = [p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")]  # no macOS ``._`` copies
     files = sorted(p for p in entries if p.suffix.lower() == ".png")
     jpegs = sorted(p.name for p in entries if p.suffix.lower() in JPEG_SUFFIXES)
     if jpegs:
@@ -53,7 +53,7 @@ def read_png_labels(folder: Path, table: NameTable) -> LabelSet:
 
 def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
     def load() -> LabelMap:
-        img = read_mask_image(path)
+        img = colour_channels(read_mask_image(path))  # an alpha channel (grey + alpha, RGBA) holds no ids
         if img.ndim == 3:
             if not all(np.array_equal(img[..., 0], img[..., c]) for c in range(1, img.shape[2])):
                 raise LabelError(path, "id map has colour channels that differ (an RGB image, not ids)",
@@ -70,18 +70,8 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
 
 
 def read_mask_image(path: Path) -> np.ndarray:
-    """A mask PNG as stored: a palette PNG's indices [H, W] (Pillow), any other image as OpenCV reads it unchanged."""
-    indices = _palette_indices(path)
-    img = indices if indices is not None else cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    """A mask PNG as stored (``stages.scene.mask_images``): palette indices, or OpenCV's unchanged read."""
+    img = read_stored_mask(path)
     if img is None:
         raise LabelError(path, "image missing or unreadable", "re-export the mask as PNG")
     return img
-
-
-def _palette_indices(path: Path) -> np.ndarray | None:
-    """The palette indices [H, W] of a palette PNG; None for any other image."""
-    try:
-        with Image.open(path) as image:
-            return np.asarray(image) if image.mode == "P" else None
-    except (OSError, ValueError):  # unreadable: OpenCV's read then names the problem
-        return None

@@ -16,7 +16,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stages.scene import InputError, frame_id_of
+from stages.scene import InputError, frame_id_of, frame_number_of
+from stages.scene.mask_images import colour_channels, read_mask_image
 
 MASK_SUFFIXES = (".png", ".npy")
 
@@ -36,14 +37,15 @@ class MaskStats:
 
 
 def index_masks(masks_dir: Path) -> dict[str, Path]:
-    """Mask files keyed on frame id (``frame_00012.png``, ``00012.npy``, ... -> ``"00012"``)."""
+    """Mask files keyed on frame number (``frame_00012.png``, ``00012.npy``, ``IMG_12.png`` ... -> ``"12"``), or
+    on frame id when a name has no number; hidden files (macOS's ``._`` copies) left out."""
     masks_dir = Path(masks_dir)
     if not masks_dir.is_dir():
         raise InputError(masks_dir, "mask folder not found", "pass the masks/ folder of the capture or labels stage")
     out: dict[str, Path] = {}
     for p in sorted(masks_dir.iterdir()):
-        if p.suffix.lower() in MASK_SUFFIXES and p.is_file():
-            out.setdefault(frame_id_of(p.stem), p)
+        if p.suffix.lower() in MASK_SUFFIXES and p.is_file() and not p.name.startswith("."):
+            out.setdefault(mask_key(p.stem), p)
     if not out:
         raise InputError(masks_dir, "no .png or .npy masks in the folder",
                          "pass a folder of per-frame id maps (PNG, 0 = static scene) or .npy masks")
@@ -66,10 +68,11 @@ def object_pixels(path: Path) -> np.ndarray:
         if arr.ndim == 2:
             return arr.astype(bool) if arr.dtype == bool else arr != 0
         raise InputError(path, f"mask has {arr.ndim} dimensions", "write an H x W id map or H x W x (K+1) one-hot")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    img = read_mask_image(path)  # the labels stage's reading: a palette PNG's indices are its ids
     if img is None:
         raise InputError(path, "mask image unreadable", "re-export the mask as a PNG id map")
-    return (img != 0).any(axis=-1) if img.ndim == 3 else img != 0
+    ids = colour_channels(img)  # an alpha channel is no id
+    return (ids != 0).any(axis=-1) if ids.ndim == 3 else ids != 0
 
 
 def fit_to_image(mask: np.ndarray, height: int, width: int, path: Path) -> np.ndarray:
@@ -81,6 +84,13 @@ def fit_to_image(mask: np.ndarray, height: int, width: int, path: Path) -> np.nd
         raise InputError(path, f"mask is {mw}x{mh} but the frame is {width}x{height} (different aspect ratio)",
                          "pass masks made for these frames")
     return cv2.resize(mask.astype(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST).astype(bool)
+
+
+def mask_key(stem: str) -> str:
+    """What pairs a mask with a frame: the frame number when the name has one (``IMG_4``, ``0004`` and
+    ``frame_00004`` are frame 4, as the labels stage pairs them), else the frame id."""
+    number = frame_number_of(stem)
+    return str(number) if number is not None else frame_id_of(stem)
 
 
 def write_colmap_masks(image_dir: Path, names: list[str], masks_dir: Path, out_dir: Path,
@@ -99,7 +109,7 @@ def write_colmap_masks(image_dir: Path, names: list[str], masks_dir: Path, out_d
         if radius is None:
             radius = max(2, round(0.01 * float(np.hypot(h, w))))
         keep = np.full((h, w), 255, np.uint8)
-        path = masks.get(frame_id_of(Path(name).stem))
+        path = masks.get(mask_key(Path(name).stem))
         if path is None:
             missing.append(name)
         else:

@@ -27,9 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stages.scene import frame_id_of
-
-from .colmap_masks import index_masks, object_pixels
+from .colmap_masks import index_masks, mask_key, object_pixels
 
 MAX_SAMPLED_FRAMES = 24
 """Frames sampled evenly over the clip (a dozen pairs of neighbours are enough to see motion)."""
@@ -155,7 +153,7 @@ def _parallax(p0: np.ndarray, p1: np.ndarray) -> float | None:
 
 def _static_scene_mask(masks: dict[str, Path] | None, name: str, shape: tuple[int, int]) -> np.ndarray | None:
     """255 where the scene is static (interactive objects move on their own), None without a mask."""
-    if masks is None or (path := masks.get(frame_id_of(Path(name).stem))) is None:
+    if masks is None or (path := masks.get(mask_key(Path(name).stem))) is None:
         return None
     objects = cv2.resize(object_pixels(path).astype(np.uint8), (shape[1], shape[0]),
                          interpolation=cv2.INTER_NEAREST)

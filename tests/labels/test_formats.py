@@ -215,7 +215,7 @@ def test_object_folders_refuse_a_frame_some_objects_lack_and_names_the_table_lac
     args = ["--input", str(src), "--frames", str(label_files.frames), "--out", str(out), "--no-progress"]
     assert labels_main(args) == 2
     err = capsys.readouterr().err
-    assert "1 frames have masks for some objects only (frame 00002 has none for ['drawer'])" in err
+    assert "1 frames have masks for some objects only (frame 2 has none for ['drawer'])" in err
     assert "an empty mask where it is not visible" in err and not out.exists()
     (src / "drawer").rename(src / "chest")
     (src / "mapping.yaml").write_text(yaml.safe_dump({1: "door", 2: "drawer", 3: "fridge"}))
@@ -260,3 +260,67 @@ def test_files_of_no_frame_and_objects_no_mask_shows_are_said_on_stderr(label_fi
     assert "1 label file(s) match no extracted frame" in err and "mask.png" in err
     assert "no mask shows ['oven'] in any frame" in err
     assert summary["labels_without_frame"] == [str(src / "masks" / "mask.png")]
+
+
+def _reference_masks(label_files) -> dict[str, np.ndarray]:
+    ingest(write_png(label_files.root, label_files.labels), label_files.frames, label_files.root / "out_grey",
+           missing_masks="leave")
+    return read_masks(label_files.root / "out_grey")
+
+
+def test_cut_out_masks_take_their_alpha_and_an_opaque_alpha_is_no_object(label_files):
+    """A cut-out (the object opaque on a transparent background, white or the photo's colours everywhere) is its
+    alpha; a mask with an opaque alpha channel is its colour (the alpha is no object pixel)."""
+    import cv2
+
+    reference = _reference_masks(label_files)
+    src = _write_object_folders(label_files.root, label_files.labels)
+    rng = np.random.default_rng(0)
+    for path in src.glob("*/*.png"):
+        mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        photo = rng.integers(0, 256, (*mask.shape, 3), dtype=np.uint8)  # colours everywhere, black pixels too
+        cv2.imwrite(str(path), np.dstack([photo, mask]))
+    ingest(src, label_files.frames, label_files.root / "out_cutout", missing_masks="leave")
+    for path in src.glob("*/*.png"):  # opaque white on opaque black
+        mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)[..., 3]
+        cv2.imwrite(str(path), np.dstack([mask, mask, mask, np.full_like(mask, 255)]))
+    ingest(src, label_files.frames, label_files.root / "out_opaque", missing_masks="leave")
+    for out in ("out_cutout", "out_opaque"):
+        masks = read_masks(label_files.root / out)
+        assert sorted(masks) == sorted(reference)
+        for fid in reference:
+            np.testing.assert_array_equal(masks[fid], reference[fid])
+
+
+def test_object_folders_named_or_padded_differently_pair_by_frame_number(label_files):
+    reference = _reference_masks(label_files)
+    src = _write_object_folders(label_files.root, label_files.labels)
+    for path in (src / "drawer").iterdir():  # 00002.png -> IMG_2.png: another tool's naming for one object
+        path.rename(path.with_name(f"IMG_{int(path.stem)}.png"))
+    (src / "door" / "._00000.png").write_bytes(b"Mac OS X        ")  # macOS metadata beside a copied file
+    (src / "._drawer.png").write_bytes(b"Mac OS X        ")
+    ingest(src, label_files.frames, label_files.root / "out", missing_masks="leave")
+    masks = read_masks(label_files.root / "out")
+    assert sorted(masks) == sorted(reference)
+    for fid in reference:
+        np.testing.assert_array_equal(masks[fid], reference[fid])
+    (src / "drawer" / "frame_0002.png").write_bytes((src / "drawer" / "IMG_2.png").read_bytes())
+    with pytest.raises(Exception, match=r"two masks name frame 2 \(IMG_2.png, frame_0002.png\)"):
+        ingest(src, label_files.frames, label_files.root / "out2", missing_masks="leave")
+
+
+def test_id_maps_with_an_alpha_channel_and_names_in_another_form_are_read(label_files):
+    import cv2
+
+    reference = _reference_masks(label_files)
+    src = write_png(label_files.root / "alpha", label_files.labels)
+    for path in sorted((src / "masks").glob("*.png")):
+        ids = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        fid = int(path.stem.rsplit("_", 1)[-1])
+        cv2.imwrite(str(path.with_name(f"img{fid}.png")), np.dstack([ids, ids, ids, np.full_like(ids, 255)]))
+        path.unlink()
+    ingest(src, label_files.frames, label_files.root / "out_alpha", missing_masks="leave")
+    masks = read_masks(label_files.root / "out_alpha")
+    assert sorted(masks) == sorted(reference)
+    for fid in reference:
+        np.testing.assert_array_equal(masks[fid], reference[fid])
