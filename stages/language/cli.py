@@ -110,7 +110,7 @@ def _query(args: argparse.Namespace) -> int:
     except CommandError as exc:
         out["resolved"] = None
         out["error"] = str(exc)
-    print(json.dumps(out, indent=2))
+    print(json.dumps(out, indent=2, ensure_ascii=False))
     return 0
 
 
@@ -145,7 +145,8 @@ def _relevancy(args: argparse.Namespace) -> int:
     with atomic_path(args.out, suffix=".png") as tmp:
         cv2.imwrite(str(tmp), np.clip(rel * 255 + 0.5, 0, 255).astype(np.uint8))
     print(json.dumps({"query": args.query, "frame": frame.frame_id, "source": args.source, "out": args.out,
-                      "mean_relevancy": float(rel.mean()), "fraction_above_0.5": float((rel > 0.5).mean())}))
+                      "mean_relevancy": float(rel.mean()), "fraction_above_0.5": float((rel > 0.5).mean())},
+                     ensure_ascii=False))
     return 0
 
 

@@ -134,5 +134,5 @@ def _control(args: argparse.Namespace) -> int:
             cv2.imwrite(str(tmp), rgb)
         report["image"] = str(path)
         report["frame"] = frame.frame_id
-    print(json.dumps(report, indent=2))
+    print(json.dumps(report, indent=2, ensure_ascii=False))  # object names as written: "Küchenschrank"
     return 0

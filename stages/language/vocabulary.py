@@ -18,7 +18,7 @@ import yaml
 
 from stages.scene import InputError
 
-_WORD = re.compile(r"[a-z0-9]+")
+_WORD = re.compile(r"[^\W_]+")  # letters and digits of any script: "Küchenschrank", "холодильник", "冷蔵庫"
 
 
 def normalize_phrase(text: str) -> str:

@@ -180,5 +180,6 @@ def main(argv: list[str] | None = None) -> int:
             "run": str(args.run), "pose": args.pose or "matrix", "frame_index": frame_index,
             "states": {n: float(v) for n, v in zip(run.objects, state, strict=True)},
             "depth_png_range": [lo, hi], "depth_units": "dataset units, distance along the ray"}, sort_keys=False))
-    print(json.dumps({"out": args.out, "states": {n: float(v) for n, v in zip(run.objects, state, strict=True)}}))
+    print(json.dumps({"out": args.out, "states": {n: float(v) for n, v in zip(run.objects, state, strict=True)}},
+                     ensure_ascii=False))
     return 0

@@ -141,3 +141,14 @@ def test_current_state_is_checked(kitchen):
 def test_split_clauses():
     assert split_clauses("Open the fridge, close the drawer and then the cabinet; open all") == [
         "open the fridge", "close the drawer", "the cabinet", "open all"]
+
+
+@pytest.mark.parametrize("names", [["холодильник", "ящик"], ["冷蔵庫", "引き出し"], ["Küchenschrank", "Schublade oben"]])
+def test_names_in_any_script_keep_their_words_and_are_commanded(names):
+    """Names come from the user's mapping.yaml or folder names: each keeps its own phrases (distinct language
+    targets), and a command naming it sets it."""
+    vocab = ObjectVocabulary.from_prompts(names, {}, None)
+    phrases = [e.state_phrase(1.0) for e in vocab.entries]
+    assert phrases == [f"open {n.lower()}" for n in names]
+    result = parse_command(f"open the {names[0]} and close the {names[1]}", names, {}, current=[0.0, 1.0])
+    assert result.states == {names[0]: 1.0, names[1]: 0.0}
