@@ -143,7 +143,8 @@ def test_split_clauses():
         "open the fridge", "close the drawer", "the cabinet", "open all"]
 
 
-@pytest.mark.parametrize("names", [["холодильник", "ящик"], ["冷蔵庫", "引き出し"], ["Küchenschrank", "Schublade oben"]])
+@pytest.mark.parametrize("names", [["холодильник", "ящик"], ["冷蔵庫", "引き出し"],
+                                   ["Küchenschrank", "Schublade oben"]])
 def test_names_in_any_script_keep_their_words_and_are_commanded(names):
     """Names come from the user's mapping.yaml or folder names: each keeps its own phrases (distinct language
     targets), and a command naming it sets it."""
