@@ -324,3 +324,34 @@ def test_id_maps_with_an_alpha_channel_and_names_in_another_form_are_read(label_
     assert sorted(masks) == sorted(reference)
     for fid in reference:
         np.testing.assert_array_equal(masks[fid], reference[fid])
+
+
+def test_full_size_masks_map_onto_frames_the_frames_stage_downscaled_by_a_rounded_factor(tmp_path):
+    """``frames --max-side`` divides both sides by one integer and rounds (4032x3024 / 5 -> 806x605); masks drawn on
+    the full-size photos are sampled under each frame pixel's centre instead of refused."""
+    import cv2
+
+    from stages.frames.cli import main as frames_main
+
+    width, height = 403, 302  # / 5 -> 80.6 x 60.4: written 81 x 60
+    photos, masks = tmp_path / "photos", tmp_path / "masks"
+    photos.mkdir()
+    masks.mkdir()
+    ids = np.zeros((height, width), np.uint8)
+    ids[40:200, 50:170] = 1
+    ids[150:290, 250:390] = 2
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        cv2.imwrite(str(photos / f"IMG_{i:04d}.jpg"), rng.integers(0, 256, (height, width, 3), dtype=np.uint8))
+        cv2.imwrite(str(masks / f"IMG_{i:04d}.png"), ids)
+    (masks / "mapping.yaml").write_text(yaml.safe_dump({1: "door", 2: "drawer"}))
+    frames = tmp_path / "frames"
+    assert frames_main(["--video", str(photos), "--out", str(frames), "--max-side", "96", "--no-progress"]) == 0
+    assert cv2.imread(str(frames / "images" / "frame_00000.png")).shape[:2] == (60, 81)
+    ingest(masks, frames, tmp_path / "out", missing_masks="leave")
+    channel = onehot_to_label_map(np.load(tmp_path / "out" / "masks" / "00001.npy"))  # background last (2)
+    got = np.where(channel == 2, 0, channel + 1)
+    rows = ((np.arange(60) + 0.5) * height / 60).astype(int)
+    cols = ((np.arange(81) + 0.5) * width / 81).astype(int)
+    np.testing.assert_array_equal(got, ids[rows][:, cols])
+    assert abs((got == 1).mean() - (ids == 1).mean()) < 0.01 and abs((got == 2).mean() - (ids == 2).mean()) < 0.01
