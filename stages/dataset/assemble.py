@@ -40,9 +40,10 @@ from stages.scene import (
     read_yaml_mapping,
     write_scene,
 )
+from stages.scene.dataset import NERFSTUDIO_KEYS
 from stages.scene.masks import check_mask_array, mask_path
 from stages.scene.splits import SplitMethod
-from stages.scene.transforms import camera_from_dict, load_json, parse_pose
+from stages.scene.transforms import camera_from_dict, frame_camera_dict, load_json, parse_pose
 from stages.states import read_states_csv
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
@@ -92,14 +93,32 @@ class PosedFrame:
     source_index: int | None
 
 
-def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict[str, Any], Path | None]:
-    """(transforms.json path, shared camera, registered frames, scene.json content or {}, point cloud or None)."""
+@dataclass(frozen=True)
+class Poses:
+    """What a poses transforms.json gives the dataset."""
+
+    path: Path
+    shared: Camera | None
+    """The top level's camera (None: every frame has its own)."""
+    frames: list[PosedFrame]
+    scene: dict[str, Any]
+    """scene.json beside it, or {}."""
+    points: Path | None
+    """Its point cloud (``ply_file_path``)."""
+    nerfstudio: dict[str, Any]
+    """nerfstudio's records of the poses' world (``applied_transform``, ...), kept in the dataset."""
+
+
+def read_poses(poses: Path, image_hw: tuple[int, int] | None = None) -> Poses:
+    """A poses transforms.json (nerfstudio or Blender form); ``image_hw`` sizes a Blender camera without w/h."""
     tpath = poses / "transforms.json" if poses.is_dir() else poses
     data = load_json(tpath)
     raw = data.get("frames")
     if not isinstance(raw, list) or not raw:
         raise AssembleError(tpath, "no registered frames", "re-run `livescene poses` (or check the file)")
-    shared = camera_from_dict(data, tpath, "top level") if "fl_x" in data else None
+    shared = None
+    if "fl_x" in data or "camera_angle_x" in data:
+        shared = camera_from_dict(data, tpath, "top level", image_hw)
     frames = []
     seen: dict[str, int] = {}
     for i, fr in enumerate(raw):
@@ -113,9 +132,10 @@ def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict
             raise AssembleError(tpath, f"frames[{seen[name]}] and {where} both give a pose for {name}",
                                 "keep one entry per image (the later one would silently replace the earlier)")
         seen[name] = i
-        cam = camera_from_dict(fr, tpath, where) if "fl_x" in fr else None
+        own = frame_camera_dict(data, fr)
+        cam = camera_from_dict(own, tpath, where, image_hw) if own is not None else None
         if cam is None and shared is None:
-            raise AssembleError(tpath, f"{where}: no intrinsics", "give fl_x, fl_y, cx, cy, w, h")
+            raise AssembleError(tpath, f"{where}: no intrinsics", "give fl_x, fl_y, cx, cy, w, h or camera_angle_x")
         src = fr.get("source_index")
         frames.append(PosedFrame(name, parse_pose(fr["transform_matrix"], tpath, f"{where} ({name})"), cam,
                                  None if src is None else int(src)))
@@ -125,7 +145,8 @@ def read_poses(poses: Path) -> tuple[Path, Camera | None, list[PosedFrame], dict
     points = None if ply is None else tpath.parent / str(ply)
     if points is not None and not points.is_file():
         raise AssembleError(tpath, f"ply_file_path {ply!r} names no file", "re-run `livescene poses`, or drop the key")
-    return tpath, shared, frames, scene, points
+    kept = {k: data[k] for k in NERFSTUDIO_KEYS if k in data and k != "ply_file_path"}
+    return Poses(tpath, shared, frames, scene, points, kept)
 
 
 def list_images(frames_dir: Path) -> tuple[Path, dict[str, str], dict[str, int]]:
@@ -179,8 +200,11 @@ def place_image(src: Path, dst: Path, copy: bool) -> None:
 
 def assemble_scene(config: AssembleConfig) -> SceneDataset:
     """Join the stage outputs, write the dataset atomically, validate it (deep) and return it."""
-    tpath, shared, posed, scene_json, points = read_poses(config.poses)
     image_dir, image_by_id, src_of_name = list_images(config.frames)
+    any_image = cv2.imread(str(image_dir / next(iter(image_by_id.values()))), cv2.IMREAD_UNCHANGED) \
+        if image_by_id else None
+    poses = read_poses(config.poses, None if any_image is None else any_image.shape[:2])
+    tpath, shared, posed, scene_json, points = poses.path, poses.shared, poses.frames, poses.scene, poses.points
     registered = {frame_id_of(Path(p.name).stem): p for p in posed}
     use = [(fid, registered[fid]) for fid in image_by_id if fid in registered]
     if not use:
@@ -295,6 +319,7 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
                           key_frames={f: v for f, v in key_frames.items() if f in used_ids},
                           scene_box=None if box is None else np.asarray(box, dtype=np.float64),
                           prompts=prompts, meta=meta)
+        ds.nerfstudio.update(poses.nerfstudio)  # the poses' world as nerfstudio recorded it (applied_transform)
         if points is not None:  # the poses' point cloud travels with the dataset (nerfstudio, `dataset orient`)
             place_image(points, tmp / POINTS_NAME, config.copy_images)
             ds.nerfstudio["ply_file_path"] = POINTS_NAME

@@ -36,6 +36,7 @@ from .transforms import (
     camera_from_dict,
     camera_to_dict,
     check_camera_model,
+    frame_camera_dict,
     load_json,
     parse_pose,
     resolve_image_path,
@@ -240,7 +241,8 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
                 raise SceneError(tpath, f"{where} has no {key!r}", f"add {key!r} to every frame")
         where = f"{where} ({fr['file_path']})"
         c2w = parse_pose(fr["transform_matrix"], tpath, where)
-        cam = camera_from_dict(fr, tpath, where) if "fl_x" in fr else None
+        own = frame_camera_dict(data, fr)
+        cam = camera_from_dict(own, tpath, where, image_hw) if own is not None else None
         if cam is None and shared is None:
             raise SceneError(tpath, f"{where}: no intrinsics at top level or in the frame",
                              "add fl_x, fl_y, cx, cy, w, h or camera_angle_x")
@@ -414,16 +416,26 @@ def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
                              "key frames must use the frame id of an image (last '_' token of its name)")
 
 
+def _camera_keys(ds: SceneDataset) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """(top-level intrinsics, each frame's own): with frames of several cameras, a key sits at the top level only
+    where every frame has the same value, since nerfstudio takes a top-level key over the frame's."""
+    top = camera_to_dict(ds.camera)
+    cams = [camera_to_dict(f.camera) if f.camera is not None else top for f in ds.frames]
+    if all(c == top for c in cams):
+        return top, [{} for _ in cams]
+    common = {k: v for k, v in top.items() if all(c.get(k) == v for c in cams)}
+    return common, [{k: v for k, v in c.items() if k not in common} for c in cams]
+
+
 def write_scene(ds: SceneDataset, root: str | Path | None = None) -> Path:
     """Write the metadata files of a dataset (images and masks are written by the caller)."""
     root = Path(root) if root is not None else ds.root
     root.mkdir(parents=True, exist_ok=True)
-    tdata: dict[str, Any] = camera_to_dict(ds.camera)
+    tdata, own = _camera_keys(ds)
     frames_out = []
-    for f in ds.frames:
+    for f, intrinsics in zip(ds.frames, own, strict=True):
         entry: dict[str, Any] = {"file_path": f.file_path, "transform_matrix": np.asarray(f.c2w).tolist()}
-        if f.camera is not None and f.camera != ds.camera:
-            entry.update(camera_to_dict(f.camera))
+        entry.update(intrinsics)
         if f.state is not None:
             entry["state"] = {k: float(v) for k, v in f.state.items()}
         if f.split is not None:

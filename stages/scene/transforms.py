@@ -85,6 +85,23 @@ def _distortion(d: dict[str, Any], path: Path, where: str) -> dict[str, float]:
     return out
 
 
+FRAME_INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h", *DISTORTION_KEYS, "distortion_params")
+"""Keys that give a frame intrinsics of its own (nerfstudio reads each from the frame when the top level lacks it)."""
+SHARED_CAMERA_KEYS = (*FRAME_INTRINSIC_KEYS, "camera_angle_x", "camera_model")
+
+
+def frame_camera_dict(top: dict[str, Any], frame: dict[str, Any]) -> dict[str, Any] | None:
+    """The intrinsics of a frame that gives any of its own (None: it takes the shared camera), completed by the
+    top level's: nerfstudio's per-key reading, so ``fl_x``, ``cx`` .. per frame with one ``w``, ``h`` at the top
+    level is a camera per frame. Where both give a key, the frame's value is taken (this project's writer never
+    writes both)."""
+    if not any(k in frame for k in FRAME_INTRINSIC_KEYS):
+        return None
+    merged = {k: top[k] for k in SHARED_CAMERA_KEYS if k in top}
+    merged.update({k: frame[k] for k in SHARED_CAMERA_KEYS if k in frame})
+    return merged
+
+
 def camera_from_dict(d: dict[str, Any], path: Path, where: str, image_hw: tuple[int, int] | None = None) -> Camera:
     """Intrinsics from a nerfstudio- or Blender-style dictionary."""
     check_camera_model(d, path, where)

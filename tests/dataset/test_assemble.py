@@ -246,3 +246,50 @@ def test_a_truncated_mask_is_named(tmp_path, capsys):
                          "--out", str(tmp_path / "ds")])
     err = capsys.readouterr().err
     assert code == 2 and f"{mask}: cannot read the mask" in err and "re-run `livescene labels`" in err
+
+
+def _rewrite_poses(paths: dict[str, Path], edit) -> Path:
+    path = paths["poses"] / "transforms.json"
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_per_frame_intrinsics_with_a_shared_size_and_the_blender_form_are_read(tmp_path):
+    """nerfstudio reads each intrinsic key from the top level, else from the frame; Blender's camera_angle_x takes
+    the frames' size. Both give the camera of the plain form."""
+    paths = make_stage_outputs(tmp_path)
+    reference = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ref",
+                                              progress=False)).camera
+
+    def per_frame(d: dict) -> None:
+        for f in d["frames"]:
+            f.update({k: d[k] for k in ("fl_x", "fl_y", "cx", "cy")})
+        for k in ("fl_x", "fl_y", "cx", "cy"):
+            d.pop(k)
+
+    _rewrite_poses(paths, per_frame)
+    ds = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds",
+                                       progress=False))
+    assert ds.camera == reference and all(f.camera in (None, reference) for f in ds.frames)
+
+    def blender(d: dict) -> None:
+        for f in d["frames"]:
+            for k in ("fl_x", "fl_y", "cx", "cy"):
+                f.pop(k)
+        d["camera_angle_x"] = 2 * np.arctan(W / 2 / reference.fx)
+        d.pop("w"), d.pop("h")
+
+    _rewrite_poses(paths, blender)
+    ds = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds2",
+                                       progress=False))
+    assert ds.camera.fx == pytest.approx(reference.fx) and (ds.camera.width, ds.camera.height) == (W, H)
+
+
+def test_the_poses_applied_transform_is_kept(tmp_path):
+    paths = make_stage_outputs(tmp_path)
+    applied = [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0]]  # ns-process-data's
+    _rewrite_poses(paths, lambda d: d.update(applied_transform=applied))
+    assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds", progress=False))
+    assert json.loads((tmp_path / "ds" / "transforms.json").read_text())["applied_transform"] == applied

@@ -161,3 +161,38 @@ def test_nerfstudio_dataparser_reads_the_dataset(tiny_dataset: SceneDataset) -> 
         assert names == sorted(Path(f.file_path).name for f in tiny_dataset.frames if f.split == expected)
         assert all(Path(p).is_file() for p in out.image_filenames)
         assert float(out.cameras.fy[0]) == pytest.approx(tiny_dataset.camera.fy)
+
+
+def test_frames_of_two_cameras_are_written_so_that_nerfstudio_reads_each_frames_own(tiny_dataset: SceneDataset):
+    """nerfstudio takes a top-level intrinsic key over the frame's: the writer keeps at the top level only what every
+    frame shares, and both readers then give each frame its camera."""
+    from dataclasses import replace
+
+    ds = read_scene(tiny_dataset.root)
+    other = replace(ds.camera, fx=ds.camera.fx * 1.5, fy=ds.camera.fy * 1.5)
+    for f in ds.frames[::2]:
+        f.camera = other
+    write_scene(ds)
+    data = json.loads((tiny_dataset.root / "transforms.json").read_text())
+    assert "fl_x" not in data and data["w"] == ds.camera.width and "w" not in data["frames"][0]
+    again = read_scene(tiny_dataset.root, deep=True)
+    view = read_like_nerfstudio(tiny_dataset.root)
+    ns_fx = {str(p.relative_to(tiny_dataset.root)): i["fl_x"] for p, i in zip(view.image_filenames, view.intrinsics,
+                                                                              strict=True)}
+    for k, f in enumerate(again.frames):
+        expected = other.fx if k % 2 == 0 else tiny_dataset.camera.fx
+        assert (f.camera or again.camera).fx == pytest.approx(expected)
+        assert ns_fx[f.file_path] == pytest.approx(expected)
+
+
+def test_per_frame_focal_lengths_with_one_size_at_the_top_level_are_read(tiny_dataset: SceneDataset) -> None:
+    def per_frame(d: dict) -> None:
+        for f in d["frames"]:
+            f.update({k: d[k] for k in ("fl_x", "fl_y", "cx", "cy")})
+        for k in ("fl_x", "fl_y", "cx", "cy"):
+            d.pop(k)
+
+    _edit(tiny_dataset.root, per_frame)
+    ds = read_scene(tiny_dataset.root, deep=True)
+    assert all(f.camera == tiny_dataset.camera for f in ds.frames) and ds.camera == tiny_dataset.camera
+    assert read_like_nerfstudio(tiny_dataset.root).intrinsics[0]["fl_x"] == tiny_dataset.camera.fx
