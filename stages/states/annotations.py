@@ -51,7 +51,7 @@ class Annotations:
 
 
 def detect_format(path: Path) -> str:
-    if path.suffix.lower() == ".csv":
+    if path.suffix.lower() in (".csv", ".tsv"):  # .tsv: a spreadsheet's tab-separated export
         return "csv"
     data = _compose(path)
     if isinstance(data, yaml.SequenceNode):
@@ -194,8 +194,8 @@ def _read_conerf(path: Path, names: dict[int, str], names_path: Path | None) -> 
 
 def _read_csv(path: Path) -> list[KeyValue]:
     with path.open(newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's "CSV UTF-8" starts with a BOM
-        reader = csv.DictReader(fh)
-        fields = [f.strip() for f in (reader.fieldnames or [])]
+        reader = csv.DictReader(fh, delimiter="\t" if path.suffix.lower() == ".tsv" else ",")
+        fields = [f.strip().lower() for f in (reader.fieldnames or [])]  # "Frame,Object,Value" as a sheet writes it
         if not {"frame", "object", "value"} <= set(fields):
             raise StateError(path, f"row 1: header {fields} lacks frame, object or value",
                              "write the header `frame,object,value`")
@@ -203,6 +203,8 @@ def _read_csv(path: Path) -> list[KeyValue]:
         out = []
         for rec in reader:
             row = reader.line_num
+            if not any((v or "").strip() for v in rec.values() if isinstance(v, str)):
+                continue  # an empty row (",,": what a spreadsheet leaves below its data)
             obj = (rec.get("object") or "").strip()
             if not obj:
                 raise StateError(path, f"row {row}: no object name", "name the object of every row")
@@ -213,5 +215,12 @@ def _read_csv(path: Path) -> list[KeyValue]:
 
 
 def _csv_frame(raw: str | None) -> Any:
+    """A CSV cell's frame: an index (``12``; ``12.0`` as a table library writes a column that once held a blank),
+    a fractional number (refused as no frame by ``_source_index``) or a frame name."""
     text = (raw or "").strip()
-    return int(text) if text.isdigit() else text
+    if text.isdigit():
+        return int(text)
+    try:
+        return float(text)
+    except ValueError:
+        return text

@@ -45,7 +45,7 @@ def test_value_that_is_no_number(tmp_path):
 
 def test_a_fractional_frame_is_refused_not_truncated(tmp_path):
     keys = write_text(tmp_path / "keys.csv", "frame,object,value\n0,door,0\n10.5,door,1\n")
-    with pytest.raises(StateError, match=r"keys\.csv: row 3: frame '10\.5' does not end in a frame number"):
+    with pytest.raises(StateError, match=r"keys\.csv: row 3: frame 10\.5 is not a whole frame index"):
         run(tmp_path, keys)
     keys = write_text(tmp_path / "key_frame_value.yaml", "0: {door: 0.0}\n2.5: {door: 1.0}\n")
     with pytest.raises(StateError, match=r"frame 2\.5 is not a whole frame index"):
@@ -57,6 +57,20 @@ def test_a_csv_saved_with_a_byte_order_mark_is_read(tmp_path):
     keys.write_bytes("frame,object,value\n0,door,0\n10,door,1\n".encode("utf-8-sig"))
     summary = run(tmp_path, keys)
     assert summary["objects"] == ["door"]
+
+
+def test_a_spreadsheets_csv_and_tsv_exports_are_read(tmp_path):
+    """Capitalised headers, ``12.0`` frames (a table library's float column) and the empty rows a spreadsheet leaves
+    below its data, comma- or tab-separated."""
+    for sub in ("plain", "sheet/csv", "sheet/tsv"):
+        (tmp_path / sub).mkdir(parents=True)
+    plain = run(tmp_path / "plain", write_text(tmp_path / "plain.csv", "frame,object,value\n0,door,0\n12,door,1\n"))
+    sheet = write_text(tmp_path / "sheet.csv", "Frame,Object,Value\r\n0.0,door,0\r\n12.0,door,1\r\n,,\r\n , , \r\n")
+    tabs = write_text(tmp_path / "sheet.tsv", "frame\tobject\tvalue\n0\tdoor\t0\n12\tdoor\t1\n\t\t\n")
+    for keys in (sheet, tabs):
+        summary = run(tmp_path / keys.stem / keys.suffix[1:], keys)
+        assert summary["objects"] == plain["objects"] == ["door"]
+        assert summary["n_key_frames"] == plain["n_key_frames"]
 
 
 def test_same_key_frame_with_two_values(tmp_path):
