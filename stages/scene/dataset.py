@@ -280,6 +280,11 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
         if m.shape not in ((3, 4), (4, 4)) or not np.isfinite(m).all():
             raise SceneError(tpath, f"applied_transform has shape {m.shape} or non-finite entries, expected 3x4",
                              "write nerfstudio's 3x4 applied_transform, or drop the key if the world was not changed")
+    ignored = [fr["file_path"] for fr in frames_raw if "mask_path" in fr]
+    if ignored:  # nerfstudio's pixels to leave out (a person, the capturer's hand): not read here
+        warnings.warn(f"{tpath}: {len(ignored)} frame(s) give nerfstudio's mask_path (pixels to leave out of "
+                      f"training, e.g. {ignored[0]}); this project does not read it and trains on every pixel; fix: "
+                      "crop or inpaint what those masks cover, or drop mask_path to silence this", stacklevel=2)
     if clamped:
         shown = "; ".join(clamped[:10]) + (f"; and {len(clamped) - 10} more" if len(clamped) > 10 else "")
         warnings.warn(f"{tpath}: states outside [0, 1] clamped to [0, 1] in {len(clamped)} frame(s): {shown}; fix: "
@@ -364,6 +369,9 @@ def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
         seen[f.frame_id] = f.file_path
         path = ds.image_path(f)
         if not path.is_file():
+            if "\\" in f.file_path:  # colmap2nerf on Windows writes .\images\x.png; nerfstudio reads "/" only
+                raise SceneError(tpath, f"file_path {f.file_path!r} is a Windows path ('\\' separators)",
+                                 "write the paths with '/' (e.g. images/frame_00000.png)")
             raise SceneError(path, f"image named by {tpath.name} ({f.file_path}) not found",
                              "restore the image or remove the frame from transforms.json")
         if f.state is not None and ds.objects:

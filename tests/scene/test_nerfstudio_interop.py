@@ -196,3 +196,13 @@ def test_per_frame_focal_lengths_with_one_size_at_the_top_level_are_read(tiny_da
     ds = read_scene(tiny_dataset.root, deep=True)
     assert all(f.camera == tiny_dataset.camera for f in ds.frames) and ds.camera == tiny_dataset.camera
     assert read_like_nerfstudio(tiny_dataset.root).intrinsics[0]["fl_x"] == tiny_dataset.camera.fx
+
+
+def test_a_windows_path_is_named_and_mask_path_is_said_to_be_unread(tiny_dataset: SceneDataset) -> None:
+    first = tiny_dataset.frames[0].file_path
+    _edit(tiny_dataset.root, lambda d: d["frames"][0].update(file_path=".\\" + first.replace("/", "\\")))
+    with pytest.raises(SceneError, match=r"is a Windows path .*fix: write the paths with '/'"):
+        read_scene(tiny_dataset.root)
+    _edit(tiny_dataset.root, lambda d: d["frames"][0].update(file_path=first, mask_path="masks/ignore.png"))
+    with pytest.warns(UserWarning, match=r"1 frame\(s\) give nerfstudio's mask_path .* trains on every pixel"):
+        read_scene(tiny_dataset.root)
