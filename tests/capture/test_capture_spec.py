@@ -37,6 +37,10 @@ def test_the_specs_the_tests_and_the_stability_suite_use_load(small_spec):
     assert spec_from_dict({"name": "bare"}) == CaptureSpec(name="bare")
 
 
+def _inside(data: dict, what: str, i: int, **fields) -> None:
+    data[what][i].update(fields)
+
+
 @pytest.mark.parametrize(("edit", "words"), [
     (lambda d: d["objects"][0].update(limits=[0, "x"]),
      ["spec.objects[0].limits[1] is 'x' (a string), expected a number"]),
@@ -49,6 +53,12 @@ def test_the_specs_the_tests_and_the_stability_suite_use_load(small_spec):
     (lambda d: d.update(name=2024), ["spec.name is 2024 (an integer), expected a string", "in quotes: '2024'"]),
     (lambda d: d.update(objects={"cabinet": {}}), ["spec.objects is", "expected a list of mappings of ObjectSpec"]),
     (lambda d: d["objects"][0].update(position=[0.0, float("nan"), 0.0]), [".position is [0.0, nan, 0.0], expected 3"]),
+    (lambda d: _inside(d, "objects", 0, position=[9.0, 0.0, 0.0]),
+     ["objects[0] (cabinet)", "outside the room", "move it inside the room"]),
+    (lambda d: _inside(d, "objects", 0, position=[0.0, 0.0, -0.3]), ["objects[0]", "outside the room"]),
+    (lambda d: _inside(d, "objects", 0, size=[0.4, 0.4, 9.0]), ["objects[0]", "outside the room"]),
+    (lambda d: d["furniture"].append({"name": "sofa", "position": [0.0, 0.0, 0.0], "size": [40.0, 1.0, 1.0]}),
+     ["furniture[", "(sofa)", "outside the room"]),
 ])
 def test_wrong_types_name_the_file_and_the_key(tmp_path, edit, words):
     data = yaml.safe_load((PRESETS / "tiny.yaml").read_text())
@@ -59,30 +69,6 @@ def test_wrong_types_name_the_file_and_the_key(tmp_path, edit, words):
         load_spec(path)
     message = str(info.value)
     assert message.startswith(f"{path}: ") and "; fix: " in message
-    for word in words:
-        assert word in message, (word, message)
-
-
-def _inside(data: dict, what: str, i: int, **fields) -> None:
-    data[what][i].update(fields)
-
-
-@pytest.mark.parametrize(("edit", "words"), [
-    (lambda d: _inside(d, "objects", 0, position=[9.0, 0.0, 0.0]), ["objects[0] (cabinet)", "outside the room"]),
-    (lambda d: _inside(d, "objects", 0, position=[0.0, 0.0, -0.3]), ["objects[0]", "outside the room"]),
-    (lambda d: _inside(d, "objects", 0, size=[0.4, 0.4, 9.0]), ["objects[0]", "outside the room"]),
-    (lambda d: d["furniture"].append({"name": "sofa", "position": [0.0, 0.0, 0.0], "size": [40.0, 1.0, 1.0]}),
-     ["furniture[", "(sofa)", "outside the room"]),
-])
-def test_an_object_or_furniture_outside_the_room_is_refused(tmp_path, edit, words):
-    data = yaml.safe_load((PRESETS / "tiny.yaml").read_text())
-    edit(data)
-    path = tmp_path / "outside.yaml"
-    path.write_text(yaml.safe_dump(data))
-    with pytest.raises(CaptureSpecError) as info:
-        load_spec(path)
-    message = str(info.value)
-    assert "move it inside the room" in message
     for word in words:
         assert word in message, (word, message)
 
