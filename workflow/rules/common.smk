@@ -26,13 +26,13 @@ def run_folder(wildcards, input):
     return str(Path(input.run).parent)
 
 
-def evaluate_args(wildcards, input):
-    keys = input.keys()
+def evaluate_args(wildcards):
+    files = evaluate_input(wildcards)
     args = []
-    if "truth" in keys:
-        args.append(f"--truth {q(input.truth)}")
-    if "pose_error" in keys:
-        args.append(f"--pose-alignment {q(input.pose_error)}")
+    if "truth" in files:
+        args.append(f"--truth {q(files['truth'])}")
+    if "pose_error" in files:
+        args.append(f"--pose-alignment {q(files['pose_error'])}")
     if not has_names(wildcards.scene):
         args.append("--no-grounding")
     return " ".join(args)
@@ -71,15 +71,17 @@ def labels_input(wildcards):
     return files
 
 
-def labels_args(wildcards, input):
+def labels_args(wildcards):
     # named only when it is not the stage's own default, so the commands (and Snakemake's params trigger) of
     # existing results stay as they were
     policy = config["labels"]["missing_masks"]
     missing = "" if policy == "propagate" else f" --missing-masks {policy}"
-    if "capture" in input.keys():
-        return f"--input {q(Path(input.capture, 'masks'))} --mapping {q(Path(input.capture, 'mapping.yaml'))}{missing}"
-    names = f" --mapping {q(input.names)}" if "names" in input.keys() else ""
-    return f"--input {q(input.masks)}{names}{missing}"
+    files = labels_input(wildcards)
+    if "capture" in files:
+        capture = files["capture"]
+        return f"--input {q(Path(capture, 'masks'))} --mapping {q(Path(capture, 'mapping.yaml'))}{missing}"
+    names = f" --mapping {q(files['names'])}" if "names" in files else ""
+    return f"--input {q(files['masks'])}{names}{missing}"
 
 
 def control_commands(wildcards):
@@ -109,17 +111,18 @@ def train_input(wildcards):
     return files
 
 
-def train_args(wildcards, input):
+def train_args(wildcards):
+    files = train_input(wildcards)
     args = []
-    if "targets" in input.keys():
-        args.append(f"--language-targets {q(input.targets)}")
+    if "targets" in files:
+        args.append(f"--language-targets {q(files['targets'])}")
     # Without key frames a scene has no per-frame states to give: LiveScene learns them.
     if not carries(wildcards.scene, "key_frames"):
         args.append("--state-mode learned")
     if config["train"]["appearance"] != "none":  # the model's default: the reference
         args.append(f"--set model.appearance.mode={config['train']['appearance']}")
-    if "exposure" in input.keys():  # measured once per scene (rule exposure), not once per method
-        args.append(f"--exposure {q(input.exposure)}")
+    if "exposure" in files:  # measured once per scene (rule exposure), not once per method
+        args.append(f"--exposure {q(files['exposure'])}")
     return " ".join(args)
 
 
@@ -148,14 +151,15 @@ def id_map_folder(path):
     return folder if has_maps else None
 
 
-def poses_masks(wildcards, input):
+def poses_masks(wildcards):
     """Id maps that keep SIFT features off the moving objects: the capture's, the user's folder, or the labels
     stage's maps of a mask file."""
-    if "capture" in input.keys():
-        return f"--masks {q(Path(input.capture, 'masks'))}"
-    if "labels" in input.keys():
-        return f"--masks {q(Path(input.labels, 'masks'))}"
-    return f"--masks {q(input.masks)}" if "masks" in input.keys() else ""
+    files = poses_input(wildcards)
+    if "capture" in files:
+        return f"--masks {q(Path(files['capture'], 'masks'))}"
+    if "labels" in files:
+        return f"--masks {q(Path(files['labels'], 'masks'))}"
+    return f"--masks {q(files['masks'])}" if "masks" in files else ""
 
 
 def assemble_input(wildcards):
@@ -172,12 +176,12 @@ def assemble_input(wildcards):
     return files
 
 
-def assemble_args(wildcards, input):
-    keys = input.keys()
-    args = [f"--{k} {q(input[k])}" for k in ("labels", "states") if k in keys]
-    if "prompts" in keys:
-        args.append(f"--prompts {q(input.prompts)}")
-    elif "capture" in keys and prompts_file(wildcards.scene) is not None and has_names(wildcards.scene):
+def assemble_args(wildcards):
+    files = assemble_input(wildcards)
+    args = [f"--{k} {q(files[k])}" for k in ("labels", "states") if k in files]
+    if "prompts" in files:
+        args.append(f"--prompts {q(files['prompts'])}")
+    elif "capture" in files and prompts_file(wildcards.scene) is not None and has_names(wildcards.scene):
         args.append(f"--prompts {q(prompts_file(wildcards.scene))}")  # inside the capture folder (an input)
     return " ".join(args)
 
@@ -194,15 +198,16 @@ def states_input(wildcards):
     return files
 
 
-def states_args(wildcards, input):
+def states_args(wildcards):
     # the sheet's fixed ranges (OBJECT=LO,HI;...), one --range each; quoted: object names may hold spaces
     ranges = "".join(f" --range {shlex.quote(item.strip())}"
                      for item in row(wildcards.scene)["state_ranges"].split(";") if item.strip())
-    if "capture" in input.keys():
-        return (f"--key-frames {q(Path(input.capture, 'key_frame_value.yaml'))}"
-                f" --mapping {q(Path(input.capture, 'mapping.yaml'))}{ranges}")
-    names = f" --mapping {q(input.names)}" if "names" in input.keys() else ""
-    return f"--key-frames {q(input.key_frames)}{names}{ranges}"
+    files = states_input(wildcards)
+    if "capture" in files:
+        return (f"--key-frames {q(Path(files['capture'], 'key_frame_value.yaml'))}"
+                f" --mapping {q(Path(files['capture'], 'mapping.yaml'))}{ranges}")
+    names = f" --mapping {q(files['names'])}" if "names" in files else ""
+    return f"--key-frames {q(files['key_frames'])}{names}{ranges}"
 
 
 def report_scene_input(wildcards):
