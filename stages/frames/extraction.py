@@ -172,6 +172,8 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "source_kind": source.kind,
             "fps": None if math.isnan(source.fps) else source.fps,
             "source_frame_count": rule.n_total,
+            # an image folder's frames are the numbers in its names (IMG_4501 ...), not 0..count-1 as a video's
+            "source_indices": list(source.indices) if source.kind == "images" else None,
             "decoded_frame_count": n_read,
             "truncated": n_read < rule.n_total,
             "dropped_frame_count": len(dropped),

@@ -23,12 +23,25 @@ class FrameTable:
     path: Path
     source_frame_count: int | None = None
     """Frames the source video holds (frames.json of the frames stage), when known."""
+    source_indices: frozenset[int] | None = None
+    """An image folder's frame numbers (frames.json), extracted or not; None for a video (0 .. count - 1)."""
 
     def in_source(self, index: int) -> bool:
-        """Whether ``index`` is a frame of the source video, extracted or not."""
+        """Whether ``index`` is a frame of the source, extracted or not."""
+        if self.source_indices is not None:
+            return index in self.source_indices
         if self.source_frame_count is None:
             return bool((self.source_index == index).any())
         return 0 <= index < self.source_frame_count
+
+    def describe_source(self) -> str:
+        """What ``in_source`` accepts, for a message."""
+        if self.source_indices is not None:
+            return (f"the image folder's names number its {len(self.source_indices)} images "
+                    f"{min(self.source_indices)}..{max(self.source_indices)}")
+        if self.source_frame_count:
+            return f"the source video has frames 0..{self.source_frame_count - 1}"
+        return f"source indices {int(self.source_index[0])}..{int(self.source_index[-1])}"
 
     def stem_of(self, index: int) -> str:
         """The image stem of the frame with this source index (``frame_{i:05d}`` when not extracted)."""
@@ -63,16 +76,22 @@ def read_frame_table(path: str | Path) -> FrameTable:
     if dup.size:
         raise StateError(path, f"source_index {int(src[dup[0]])} appears twice", "list every source frame once")
     names = tuple(str(table["frame"].iloc[i]) for i in order)
-    return FrameTable(names=names, source_index=src, path=path, source_frame_count=_source_frame_count(path))
+    count, indices = _source_frames(path)
+    return FrameTable(names=names, source_index=src, path=path, source_frame_count=count, source_indices=indices)
 
 
-def _source_frame_count(frames_csv: Path) -> int | None:
-    """Decoded frame count from frames.json beside frames.csv: key frames between extracted frames are valid."""
+def _source_frames(frames_csv: Path) -> tuple[int | None, frozenset[int] | None]:
+    """(decoded frame count, an image folder's frame numbers) from frames.json beside frames.csv: key frames
+    between extracted frames are valid."""
     summary = frames_csv.with_name("frames.json")
     if not summary.is_file():
-        return None
+        return None, None
     try:
-        count = json.loads(summary.read_text()).get("decoded_frame_count")
+        data = json.loads(summary.read_text())
+        count, numbers = data.get("decoded_frame_count"), data.get("source_indices")
     except (json.JSONDecodeError, AttributeError):
-        return None
-    return int(count) if isinstance(count, int) and count > 0 else None
+        return None, None
+    indices = frozenset(int(i) for i in numbers) if isinstance(numbers, list) and numbers else None
+    if data.get("source_kind") == "images" and indices is None:
+        return None, None  # written before frames.json listed an image folder's numbers: the extracted frames
+    return (int(count) if isinstance(count, int) and count > 0 else None), indices

@@ -74,8 +74,7 @@ def check_key_values(config: StatesConfig, ann: Annotations, frames: FrameTable,
                              f"{objects})", "fix the name or add the object to the name table")
         # a key frame between extracted frames (subsampled video) still pins the curve; one outside the video cannot
         if not frames.in_source(kv.source_index) and not config.allow_missing_frames:
-            known = (f"the source video has frames 0..{frames.source_frame_count - 1}" if frames.source_frame_count
-                     else f"source indices {int(frames.source_index[0])}..{int(frames.source_index[-1])}")
+            known = frames.describe_source()
             raise StateError(ann.path, f"row {kv.row}: key frame {kv.source_index} ({kv.object}) is a frame that "
                              f"does not exist in {frames.path} ({known})",
                              "fix the frame index, re-extract the frames, or pass --allow-missing-frames")

@@ -183,3 +183,27 @@ def test_option_for_an_unknown_object_or_method(tmp_path):
         run(tmp_path, keys, object_methods={"sofa": "step"})
     with pytest.raises(StateError, match=r"--method: unknown method 'cubic'"):
         run(tmp_path, keys, method="cubic")
+
+
+def test_key_frames_of_an_image_folder_numbered_by_the_camera(tmp_path, capsys):
+    """Photos IMG_4501 .. IMG_4512 are frames 4501 .. 4512: a key frame on any of them counts, extracted or not, and
+    one on a number the folder does not hold is refused with the folder's numbers."""
+    import cv2
+    import numpy as np
+
+    from stages.frames.cli import main as frames_main
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(4501, 4513):
+        cv2.imwrite(str(photos / f"IMG_{i}.jpg"), rng.integers(0, 256, (24, 32, 3), dtype=np.uint8))
+    frames = tmp_path / "frames"
+    assert frames_main(["--video", str(photos), "--out", str(frames), "--count", "4", "--no-progress"]) == 0
+    keys = write_text(tmp_path / "keys.csv", "frame,object,value\n4501,door,0\n4512,door,1\n")
+    summary = compute_states(StatesConfig(key_frames=keys, frames=frames / "frames.csv", out=tmp_path / "out"))
+    assert summary["n_key_frames"] == {"door": 2}
+    bad = write_text(tmp_path / "bad.csv", "frame,object,value\n4501,door,0\n4000,door,1\n")
+    with pytest.raises(StateError, match=r"key frame 4000 \(door\) is a frame that does not exist .*its 12 images "
+                                         r"4501\.\.4512"):
+        compute_states(StatesConfig(key_frames=bad, frames=frames / "frames.csv", out=tmp_path / "out2"))
