@@ -38,10 +38,22 @@ def evaluate_args(wildcards):
     return " ".join(args)
 
 
+def folder_files(path):
+    """Every file under a folder of the user's (hidden ones left out), as extra inputs: Snakemake watches a folder
+    input by its own time stamp only, which a mask or photo overwritten in place does not change."""
+    folder = Path(path)
+    if not folder.is_dir():
+        return []
+    return sorted(str(p) for p in folder.rglob("*")
+                  if p.is_file() and not any(part.startswith(".") for part in p.relative_to(folder).parts))
+
+
 def frames_input(wildcards):
-    """A synthetic scene's capture folder, or the row's video / image folder."""
+    """A synthetic scene's capture folder, or the row's video / image folder (and the folder's files)."""
     scene = wildcards.scene
-    return capture_dir(scene) if source(scene) == "synthetic" else row(scene)["path"]
+    if source(scene) == "synthetic":
+        return {"source": capture_dir(scene)}
+    return {"source": row(scene)["path"], "source_files": folder_files(row(scene)["path"])}
 
 
 def frames_selection(wildcards):
@@ -56,7 +68,7 @@ def frames_selection(wildcards):
 
 
 def frames_video(wildcards, input):
-    return str(Path(input[0], "video.mp4")) if source(wildcards.scene) == "synthetic" else input[0]
+    return str(Path(input.source, "video.mp4")) if source(wildcards.scene) == "synthetic" else input.source
 
 
 def labels_input(wildcards):
@@ -66,6 +78,7 @@ def labels_input(wildcards):
         files["capture"] = capture_dir(scene)
     else:
         files["masks"] = row(scene)["masks"]
+        files["masks_files"] = folder_files(row(scene)["masks"])
         if carries(scene, "names"):
             files["names"] = row(scene)["names"]
     return files
@@ -133,6 +146,7 @@ def poses_input(wildcards):
         files["capture"] = capture_dir(scene)
     elif carries(scene, "masks") and (maps := id_map_folder(row(scene)["masks"])) is not None:
         files["masks"] = str(maps)
+        files["masks_files"] = folder_files(maps)
     elif carries(scene, "masks"):
         # a COCO / LabelMe file or folder, or one folder of masks per object: COLMAP reads the labels stage's id
         # maps of it (docs/poses.md)

@@ -3,7 +3,7 @@
 
 rule frames:
     input:
-        frames_input,
+        unpack(frames_input),
     output:
         directory(R("{scene}", "frames")),
     log:

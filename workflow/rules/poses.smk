@@ -42,6 +42,7 @@ rule poses_import:
     input:
         frames=R("{scene}", "frames"),
         model=lambda w: imported_model(w.scene),
+        model_files=lambda w: folder_files(imported_model(w.scene)),
     output:
         directory(R("{scene}", "poses")),
     log:

@@ -31,7 +31,8 @@ rule assemble:
 
 rule scene_validate:
     input:
-        lambda w: row(w.scene)["path"],
+        data=lambda w: row(w.scene)["path"],
+        data_files=lambda w: folder_files(row(w.scene)["path"]),
     output:
         R("{scene}", "dataset_valid.json"),
     log:
@@ -47,7 +48,8 @@ rule scene_validate:
     conda:
         ENV
     shell:
-        "({params.cli} scene validate {input:q} && {params.cli} scene info {input:q} > {output:q}) > {log:q} 2>&1"
+        "({params.cli} scene validate {input.data:q} && {params.cli} scene info {input.data:q} > {output:q})"
+        " > {log:q} 2>&1"
 
 
 rule dataset_orient:
@@ -55,6 +57,7 @@ rule dataset_orient:
         scene=scene_pattern(orients_ready_dataset),
     input:
         data=lambda w: row(w.scene)["path"],
+        data_files=lambda w: folder_files(row(w.scene)["path"]),
         valid=R("{scene}", "dataset_valid.json"),
     output:
         directory(R("{scene}", "dataset")),
