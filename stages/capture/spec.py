@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from stages.scene import InputError, read_yaml_mapping
+from stages.scene.dataset import object_name_problem
 from stages.scene.typed_yaml import from_mapping
 
 OBJECT_KINDS = ("door", "drawer", "lid")
@@ -322,6 +323,8 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
         raise CaptureSpecError(path, f"object names {dupes} appear more than once", "give each object a unique name")
     for i, o in enumerate(spec.objects):
         where = f"objects[{i}] ({o.name})"
+        if (problem := object_name_problem(o.name)) is not None:
+            raise CaptureSpecError(path, f"{where}: the name {problem}", "name the object in words (e.g. 'top drawer')")
         if o.kind not in OBJECT_KINDS:
             raise CaptureSpecError(path, f"{where}: kind {o.kind!r} unknown", f"use one of {OBJECT_KINDS}")
         if o.hinge is not None and o.hinge not in HINGES[o.kind]:

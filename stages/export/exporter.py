@@ -31,6 +31,13 @@ EXPORT_FORMAT = 1
 """Version of export.json (bump when its keys change: the report reads it)."""
 
 
+def file_stem(name: str) -> str:
+    """An object name as a file name: path separators and a bare '.' / '..' replaced (names are checked where they
+    are read; this keeps a file inside its folder whatever reaches it)."""
+    stem = name.replace("/", "-").replace("\\", "-")
+    return "_" if stem.strip() in ("", ".", "..") else stem
+
+
 class Renderable(Protocol):
     """What the exporter needs of a run: ``stages.model.LoadedRun`` (or a test double)."""
 
@@ -152,8 +159,9 @@ def export_state(run: Renderable, views: Sequence[tuple[int, Camera, np.ndarray]
     geometry: dict[str, Any] = {"scene_mesh": scene.extract_mesh(), "scene_points": scene.extract_points()}
     if parts is not None:
         for name, fusion in parts.parts.items():
-            geometry[f"objects/{name}_mesh"] = fusion.extract_mesh()
-            geometry[f"objects/{name}_points"] = fusion.extract_points()
+            stem = file_stem(name)  # a name is no path (checked where it is read; kept so here too)
+            geometry[f"objects/{stem}_mesh"] = fusion.extract_mesh()
+            geometry[f"objects/{stem}_points"] = fusion.extract_points()
     extract_s = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from stages.scene import read_yaml_mapping
+from stages.scene.dataset import object_name_problem
 
 from .errors import LabelError
 
@@ -54,6 +55,9 @@ def read_name_table(path: str | Path) -> NameTable:
         items.append((ident, str(value).strip()))
     items.sort()
     names = [n for _, n in items]
+    for n in names:
+        if (problem := object_name_problem(n)) is not None:
+            raise LabelError(path, f"object name {n!r} {problem}", "name the object in words (e.g. 'top drawer')")
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise LabelError(path, f"object names {dupes} appear more than once", "give each object one unique name")

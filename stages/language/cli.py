@@ -119,7 +119,7 @@ def _relevancy(args: argparse.Namespace) -> int:
     import numpy as np
 
     from stages.model.run import dataset_of_run, open_run
-    from stages.scene import atomic_path, read_scene
+    from stages.scene import atomic_path, guard_output_file, read_scene
 
     from .grounding import Grounder
     from .vocabulary import ObjectVocabulary
@@ -127,7 +127,11 @@ def _relevancy(args: argparse.Namespace) -> int:
     if not args.query.strip():
         raise InputError(Path("QUERY"), "the text query is empty", 'give the words to look for, e.g. "fridge"')
     data = dataset_of_run(args.run, args.data)
+    guard_output_file(args.out, "the relevancy map", suffixes=(".png",), inputs=[args.run, data])
     ds = read_scene(data)
+    if not ds.objects:
+        raise InputError(Path(data) / "mapping.yaml", "the scene names no objects, so a query has none to find",
+                         "query a run of a scene with named objects (mapping.yaml)")
     run = open_run(args.run, args.device)
     frames = ds.frames_in("test") or ds.frames
     frame = ds.frame_by_id(args.frame) if args.frame else frames[0]
@@ -143,7 +147,8 @@ def _relevancy(args: argparse.Namespace) -> int:
     else:
         rel = grounder.relevancy_from_probs(out["probs"], args.query)
     with atomic_path(args.out, suffix=".png") as tmp:
-        cv2.imwrite(str(tmp), np.clip(rel * 255 + 0.5, 0, 255).astype(np.uint8))
+        if not cv2.imwrite(str(tmp), np.clip(rel * 255 + 0.5, 0, 255).astype(np.uint8)):
+            raise OSError(f"could not write {args.out}")
     print(json.dumps({"query": args.query, "frame": frame.frame_id, "source": args.source, "out": args.out,
                       "mean_relevancy": float(rel.mean()), "fraction_above_0.5": float((rel > 0.5).mean())},
                      ensure_ascii=False))

@@ -124,14 +124,16 @@ def _control(args: argparse.Namespace) -> int:
         import numpy as np
 
         from stages.model.run import open_run
-        from stages.scene import atomic_path
+        from stages.scene import atomic_path, guard_output_file
 
+        path = Path(args.out or "control.png")
+        guard_output_file(path, "the control render", suffixes=(".png",), inputs=[args.run, ds.root])
         run = open_run(args.run, args.device)
         out = run.render(ds.camera_of(frame), frame.c2w, result.states, frame_index=ds.frames.index(frame))
-        path = Path(args.out or "control.png")
         rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)
         with atomic_path(path, suffix=".png") as tmp:
-            cv2.imwrite(str(tmp), rgb)
+            if not cv2.imwrite(str(tmp), rgb):
+                raise OSError(f"could not write {path}")
         report["image"] = str(path)
         report["frame"] = frame.frame_id
     print(json.dumps(report, indent=2, ensure_ascii=False))  # object names as written: "Küchenschrank"

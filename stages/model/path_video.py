@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -18,7 +20,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from stages.scene import InputError, atomic_path, write_json
+from stages.scene import STAGE_MARKER, InputError, atomic_path, write_json
 
 from .camera_path import CameraPath, path_to_json
 
@@ -52,6 +54,7 @@ def _write_frame(path: Path, rgb: np.ndarray) -> None:
 def render_frames(run: Any, cp: CameraPath, frames_dir: Path, run_id: dict[str, Any],
                   progress: bool = True) -> dict[str, Any]:
     """Render every missing frame of ``cp`` into ``frames_dir``; returns counts and seconds."""
+    check_frames_dir(frames_dir)
     frames_dir.mkdir(parents=True, exist_ok=True)
     fingerprint = path_fingerprint(cp, run_id)
     meta_path = frames_dir / "frames.json"
@@ -61,14 +64,11 @@ def render_frames(run: Any, cp: CameraPath, frames_dir: Path, run_id: dict[str, 
             old = json.loads(meta_path.read_text()).get("fingerprint")
         except (OSError, json.JSONDecodeError):
             old = None
-        if old != fingerprint:
+        if old != fingerprint:  # an earlier path's or run's frames (this folder is a video render's: checked)
             for png in frames_dir.glob("frame_*.png"):
                 png.unlink()
                 stale += 1
-    elif any(frames_dir.glob("frame_*.png")):  # frames of unknown origin: not reused
-        for png in frames_dir.glob("frame_*.png"):
-            png.unlink()
-            stale += 1
+    (frames_dir / STAGE_MARKER).write_text(FRAMES_STAGE + "\n")
     write_json(frames_dir / "camera_path.json", path_to_json(cp))
     write_json(meta_path, {"fingerprint": fingerprint, "run": run_id, "n_frames": len(cp.frames)})
     rendered = skipped = 0
@@ -86,6 +86,53 @@ def render_frames(run: Any, cp: CameraPath, frames_dir: Path, run_id: dict[str, 
         rendered += 1
     return {"frames": len(cp.frames), "rendered": rendered, "skipped": skipped, "stale_deleted": stale,
             "render_seconds": round(seconds, 3), "fps": round(rendered / seconds, 3) if seconds > 0 else None}
+
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".webm", ".mov")
+"""Names a video ``--out`` may have (a typo such as ``--out run/model.pt`` is refused before any rendering)."""
+FRAMES_STAGE = "render video"
+"""The marker a video's frame folder carries (``STAGE_MARKER``): the only folder whose frames a render replaces."""
+
+
+def check_frames_dir(frames_dir: Path) -> None:
+    """Refuse a ``--frames-dir`` that holds anything but an earlier video render's frames: stale frames are deleted
+    there, and a dataset's images or the frames stage's output (``frame_*.png`` too) must never be."""
+    if not frames_dir.exists():
+        return
+    if not frames_dir.is_dir():
+        raise InputError(frames_dir, "exists and is not a folder; a video's frames are written here",
+                         "choose another --frames-dir")
+    if not any(frames_dir.iterdir()):
+        return
+    marker = frames_dir / STAGE_MARKER
+    ours = marker.is_file() and marker.read_text().strip() == FRAMES_STAGE
+    if not ours and (frames_dir / "camera_path.json").is_file() and (frames_dir / "frames.json").is_file():
+        try:  # written before the marker: a render's frames.json holds the path's fingerprint
+            ours = "fingerprint" in json.loads((frames_dir / "frames.json").read_text())
+        except (OSError, json.JSONDecodeError, AttributeError, TypeError):
+            ours = False
+    if not ours:
+        raise InputError(frames_dir, "holds files that are not an earlier video render's frames; a render deletes "
+                         "the frames it cannot reuse there", "choose another --frames-dir (an empty or new folder, "
+                         "or the frames folder of an earlier video render)")
+
+
+def check_video_codec(out: str | Path, codec: str) -> None:
+    """Whether OpenCV can write ``codec`` into a file named like ``out``, tried on a tiny file beside it before any
+    frame is rendered."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, trial = tempfile.mkstemp(prefix=f".{out.name}.{os.getpid()}.", suffix=out.suffix or ".tmp", dir=out.parent)
+    os.close(fd)
+    try:
+        writer = cv2.VideoWriter(trial, cv2.VideoWriter_fourcc(*codec), 10.0, (16, 16))
+        opened = writer.isOpened()
+        writer.release()
+    finally:
+        Path(trial).unlink(missing_ok=True)
+    if not opened:
+        raise InputError(out, f"OpenCV cannot encode {codec!r} into {out.suffix or 'this file'}",
+                         f"use --codec mp4v (always available) and an .mp4 name; codecs: {list(CODECS)}")
 
 
 def encode_video(frames_dir: Path, n_frames: int, fps: float, out: str | Path, codec: str = "mp4v") -> int:

@@ -12,13 +12,21 @@ import cv2
 import numpy as np
 import yaml
 
-from stages.scene import Camera, InputError, atomic_dir, read_scene
+from stages.scene import Camera, InputError, atomic_dir, guard_output_file, read_scene
 from stages.scene.cli_errors import cli_errors
 from stages.scene.state_values import parse_state_assignments
 from stages.scene.transforms import parse_pose
 
 from .camera_path import CameraPath, best_view_of, orbit_path, read_camera_path, states_sweep_path
-from .path_video import CODECS, encode_video, frames_dir_for, render_frames
+from .path_video import (
+    CODECS,
+    VIDEO_SUFFIXES,
+    check_frames_dir,
+    check_video_codec,
+    encode_video,
+    frames_dir_for,
+    render_frames,
+)
 from .run import LoadedRun, dataset_of_run, load_run
 
 
@@ -72,7 +80,8 @@ def _write_png(path: Path, img: np.ndarray) -> None:
     arr = np.clip(np.asarray(img, dtype=np.float64) * 255.0 + 0.5, 0, 255).astype(np.uint8)
     if arr.ndim == 3:
         arr = arr[..., ::-1]
-    cv2.imwrite(str(path), arr)
+    if not cv2.imwrite(str(path), arr):
+        raise OSError(f"could not write {path}")
 
 
 def _made_path_camera(args: argparse.Namespace, camera):
@@ -128,12 +137,20 @@ def _render_video(args: argparse.Namespace) -> int:
 
     if args.threads > 0:
         torch.set_num_threads(args.threads)
+    frames_dir = Path(args.frames_dir) if args.frames_dir else frames_dir_for(args.out)
+    # before any frame is rendered: a bad --out or --frames-dir fails at once and deletes nothing
+    try:
+        data = dataset_of_run(args.run, args.data)
+    except InputError:  # an orbit needs no dataset: only the run is guarded then
+        data = None
+    guard_output_file(args.out, "the video", suffixes=VIDEO_SUFFIXES, inputs=[args.run, data])
+    check_frames_dir(frames_dir)
+    check_video_codec(args.out, args.codec)
     run = load_run(args.run, device=args.device)
     cp = _video_path(args, run)
     model = Path(args.run) / "model.pt"
     run_id = {"run": str(Path(args.run).resolve()), "step": run.step, "model_bytes": model.stat().st_size,
               "model_mtime_ns": model.stat().st_mtime_ns}
-    frames_dir = Path(args.frames_dir) if args.frames_dir else frames_dir_for(args.out)
     stats = render_frames(run, cp, frames_dir, run_id, progress=not args.no_progress)
     t = time.perf_counter()
     size = encode_video(frames_dir, len(cp.frames), cp.fps, args.out, args.codec)
@@ -163,8 +180,7 @@ def main(argv: list[str] | None = None) -> int:
             frame_index = ds.frames.index(frame)
     else:
         c2w = _parse_matrix(args.pose_matrix)
-        data = args.data or run.config.data
-        camera = read_scene(data, validate=False).camera
+        camera = read_scene(dataset_of_run(args.run, args.data), validate=False).camera
     out = run.render(camera, c2w, parse_state_assignments(args.state) or None, frame_index=frame_index)
     state = run.state_vector(parse_state_assignments(args.state) or None, frame_index)
     with atomic_dir(args.out, "render", inputs=[args.run], legacy=["render.yaml"]) as tmp:

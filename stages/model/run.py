@@ -33,7 +33,7 @@ from .config import RunConfig, config_from_dict
 from .methods import SceneInfo, build_model
 from .rays import RayBundle
 from .scene_normalization import SceneNormalization, aabb_near_far
-from .trainer import MODEL_FORMAT
+from .trainer import MODEL_FORMAT, resolve_device
 
 States = Mapping[str, float] | Sequence[float] | np.ndarray | None
 IMAGE_OUTPUTS = ("rgb", "depth", "accumulation", "probs", "language")
@@ -47,7 +47,7 @@ class LoadedRun:
 
     def __init__(self, run_dir: Path, payload: dict[str, Any], device: str = "cpu") -> None:
         self.run_dir = run_dir
-        self.device = torch.device(device)
+        self.device = resolve_device(device)  # "auto", or a clear error for CUDA on a machine without it
         keep_freed_memory()
         self.config = config_from_dict(payload["config"], str(run_dir / "model.pt"))
         self.method = str(payload["method"])
@@ -181,6 +181,7 @@ class LoadedRun:
 
 def load_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
     """Open a run folder written by ``livescene train`` (needs model.pt)."""
+    resolve_device(device)  # before the weights are read
     run_dir = Path(run_dir)
     path = run_dir / "model.pt"
     if not path.is_file():

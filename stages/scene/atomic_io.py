@@ -140,6 +140,26 @@ def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Pat
                      "that folder away yourself")
 
 
+def guard_output_file(path: str | Path, what: str, *, suffixes: Sequence[str],
+                      inputs: Sequence[str | Path | None] = ()) -> None:
+    """Refuse a single-file output that would overwrite something it should not: a file of another kind than
+    ``suffixes`` (``--out run/model.pt`` for a PNG), one of the ``inputs`` (None: not given) or a file inside an
+    input folder (a run's weights, a dataset's images). Call it before the work, so a bad ``--out`` fails at once."""
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise InputError(path, f"is no {'/'.join(suffixes)} file name; {what} is written here",
+                         f"give --out a name ending in {suffixes[0]}")
+    target = path.resolve()
+    for item in filter(None, inputs):
+        src = Path(item).resolve()
+        if src == target or src in target.parents:
+            where = "is the input" if src == target else "lies inside the input"
+            raise InputError(path, f"{where} {item}; writing {what} there would overwrite it or add to it",
+                             "choose an --out outside the inputs")
+    if path.is_dir():
+        raise InputError(path, "is a folder, and this output is a file", "give a file name (e.g. inside that folder)")
+
+
 @contextlib.contextmanager
 def atomic_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path | None] = (),
                legacy: Sequence[str] = (), force: bool = False) -> Iterator[Path]:

@@ -191,6 +191,20 @@ class SceneDataset:
         return out
 
 
+def object_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name an object, or None: names become file names (``objects/<name>_mesh.ply``, the
+    per-object mask folders), so a path separator or a bare ``.`` / ``..`` would write outside an output folder."""
+    if not name.strip():
+        return "is empty"
+    if "/" in name or "\\" in name:
+        return "holds a path separator ('/' or '\\')"
+    if name.strip() in (".", ".."):
+        return "is a folder name ('.' or '..')"
+    if any(ord(c) < 32 for c in name):
+        return "holds a control character"
+    return None
+
+
 def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
     if not path.is_file():
         return [], []
@@ -203,6 +217,9 @@ def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
             raise SceneError(path, f"id {k!r} is not an integer", "write {int_id: object_name}") from exc
     items.sort()
     names = [n for _, n in items]
+    for n in names:
+        if (problem := object_name_problem(n)) is not None:
+            raise SceneError(path, f"object name {n!r} {problem}", "name the object in words (e.g. 'top drawer')")
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise SceneError(path, f"object names {dupes} appear more than once", "give each object one unique name")

@@ -40,9 +40,12 @@ def load_json(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise SceneError(path, "file not found", "point to a scene folder that holds transforms.json")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8-sig"))  # a BOM, as some Windows editors save, is allowed
     except json.JSONDecodeError as exc:
         raise SceneError(path, f"not valid JSON ({exc})", "repair or regenerate the file") from exc
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, f"is not UTF-8 text ({exc.reason} at byte {exc.start})",
+                         "save the file as UTF-8 (JSON's encoding)") from exc
     if not isinstance(data, dict):
         raise SceneError(path, "top level is not a JSON object", "regenerate the file")
     return data

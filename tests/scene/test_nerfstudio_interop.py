@@ -206,3 +206,17 @@ def test_a_windows_path_is_named_and_mask_path_is_said_to_be_unread(tiny_dataset
     _edit(tiny_dataset.root, lambda d: d["frames"][0].update(file_path=first, mask_path="masks/ignore.png"))
     with pytest.warns(UserWarning, match=r"1 frame\(s\) give nerfstudio's mask_path .* trains on every pixel"):
         read_scene(tiny_dataset.root)
+
+
+def test_a_transforms_json_in_another_encoding_is_named(tiny_dataset: SceneDataset) -> None:
+    path = tiny_dataset.root / "transforms.json"
+    path.write_bytes(path.read_text().replace('"frames"', '"frames"', 1).encode("utf-8").replace(b"{", b"{\xff", 1))
+    with pytest.raises(SceneError, match=r"is not UTF-8 text .*fix: save the file as UTF-8"):
+        read_scene(tiny_dataset.root)
+
+
+@pytest.mark.parametrize("name", ["../../esc", "a/b", "..", "back\\slash"])
+def test_an_object_name_that_is_a_path_is_refused(tiny_dataset: SceneDataset, name: str) -> None:
+    (tiny_dataset.root / "mapping.yaml").write_text(json.dumps({1: name, 2: "drawer"}))
+    with pytest.raises(SceneError, match=r"object name .* fix: name the object in words"):
+        read_scene(tiny_dataset.root)
