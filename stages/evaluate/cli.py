@@ -96,6 +96,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.truth:
         same_world = str(ds.meta.get("units", "")).lower() != "colmap"
         truth = TruthSource.from_capture(args.truth, args.pose_alignment, same_world=same_world).after_turn(ds.meta)
+        if sorted(truth.object_ids) != sorted(ds.objects):  # another room's truth: its renders would be compared
+            raise InputError(Path(args.truth) / "mapping.yaml", f"the truth capture's objects "
+                             f"{sorted(truth.object_ids)} are not the dataset's {sorted(ds.objects)}",
+                             "pass --truth the capture this dataset was made from")
     grounder = None
     if not args.no_grounding:
         from stages.language.cli import encoder_from_args

@@ -133,3 +133,19 @@ def test_metrics_of_a_real_run_are_identical_between_evaluations(real_run, tmp_p
                                   "--max-views", "2", "--unseen-views", "1", "--scale", "0.5"]) == 0
     assert (outs[0] / "metrics.json").read_bytes() == (outs[1] / "metrics.json").read_bytes()
     assert all(json.loads((o / "timings.json").read_text())["held_out"]["render_seconds"] > 0 for o in outs)
+
+
+def test_a_truth_capture_of_other_objects_is_refused(real_run, tmp_path, capsys):
+    capture, data, run = real_run
+    other = tmp_path / "other"  # the same capture but for its object names: another room's, as far as names go
+    other.mkdir()
+    (other / "mapping.yaml").write_text("1: fridge\n2: oven\n")
+    for item in capture.iterdir():
+        if not (other / item.name).exists():
+            (other / item.name).symlink_to(item.resolve())
+    code = evaluate_cli.main(["--run", str(run), "--data", str(data), "--truth", str(other), "--out",
+                              str(tmp_path / "eval"), "--no-grounding"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "the truth capture's objects ['fridge', 'oven'] are not the dataset's" in err and "fix: pass --truth" in err
+    assert not (tmp_path / "eval").exists()
