@@ -18,6 +18,9 @@ def test_schemas_list_the_registered_methods():
     config = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())
     enum = config["properties"]["methods"]["items"]["enum"]
     assert sorted(enum) == sorted(METHODS) == sorted(ALL_METHODS)
+    props = config["properties"]  # the report's sweeps and the export name methods too: a typo is refused
+    for section, key in (("report", "sweep_methods"), ("export", "methods")):
+        assert props[section]["properties"][key]["items"]["enum"] == enum, (section, key)
     pattern = yaml.safe_load((SCHEMAS / "scenes.schema.yaml").read_text())["properties"]["methods"]["pattern"]
     for name in enum:
         assert re.fullmatch(pattern, name) and re.fullmatch(pattern, f"livescene,{name}"), name
