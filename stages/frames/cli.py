@@ -30,9 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-side", type=int, default=None, metavar="PX",
                    help="write the frames downscaled by the smallest integer factor that brings their longer side to "
                         "at most PX (masks and COLMAP models of the full size still fit; default: full size)")
-    p.add_argument("--prefer-masked", type=Path, default=None, metavar="DIR",
-                   help="a frame whose source index names a file in DIR (a mask annotation, e.g. frame_00012.png) "
-                        "is kept in its window instead of a sharper one, so --count/--stride keep annotated frames")
+    p.add_argument("--prefer-masked", type=Path, default=None, metavar="MASKS",
+                   help="a frame that the mask annotations MASKS name (a folder of masks such as frame_00012.png or "
+                        "IMG_12.png, one folder per object, LabelMe files, or a COCO file) is kept in its window "
+                        "instead of a sharper one, so --count/--stride keep annotated frames")
     p.add_argument("--fps", type=float, help="frame rate of an image folder, for timestamps (videos carry their own)")
     p.add_argument("--accept-truncated", action="store_true",
                    help="keep the frames that decode when a video ends before its declared length")
@@ -57,8 +58,9 @@ def main(argv: list[str] | None = None) -> int:
                          "give --max-dropped between 0 (refuse any damaged frame) and 1")
     if args.max_side is not None and args.max_side < 16:
         raise InputError(Path("--max-side"), f"{args.max_side} pixels", "give --max-side of at least 16, e.g. 960")
-    if args.prefer_masked is not None and not args.prefer_masked.is_dir():
-        raise InputError(args.prefer_masked, "mask folder not found", "pass the folder of the mask annotations")
+    if args.prefer_masked is not None and not args.prefer_masked.exists():
+        raise InputError(args.prefer_masked, "mask annotations not found",
+                         "pass the folder of the mask annotations, or a COCO file")
     if args.fps is not None and not args.fps > 0:
         raise InputError(Path("--fps"), f"{args.fps} frames per second", "give a positive frame rate")
     from .extraction import extract_frames

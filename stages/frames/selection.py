@@ -7,6 +7,7 @@ while a blurred frame is replaced by a sharper neighbour.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,9 +72,45 @@ def scaled_size(width: int, height: int, factor: int) -> tuple[int, int]:
     return max(1, round(width / factor)), max(1, round(height / factor))
 
 
-def indices_named_in(folder: Path) -> frozenset[int]:
-    """Source indices that files in ``folder`` name (``frame_number_of``: frame_00012.png, 0012.npy, IMG_0012.png,
-    img12.png), as image folders and the labels stage read them; hidden files left out."""
-    numbers = (frame_number_of(path.stem) for path in Path(folder).iterdir()
-               if path.is_file() and not path.name.startswith("."))
+def indices_named_in(annotations: Path) -> frozenset[int]:
+    """Source indices that mask annotations name, as the labels stage reads them (``frame_number_of``): the files
+    of a mask folder (frame_00012.png, 0012.npy, IMG_0012.png, img12.png, LabelMe's one .json per image), those of
+    its ``masks/`` subfolder or of one folder per object, or the images of a COCO file; hidden files left out."""
+    annotations = Path(annotations)
+    if annotations.is_file():
+        return _coco_image_numbers(annotations)
+    folders = [annotations, annotations / "masks", *(d for d in annotations.iterdir()
+                                                      if d.is_dir() and not d.name.startswith("."))]
+    numbers = set()
+    for folder in (f for f in folders if f.is_dir()):
+        files = [p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")]
+        jsons = [p for p in files if p.suffix.lower() == ".json"]
+        if folder == annotations and len(jsons) == 1 and _is_coco(jsons[0]):  # a COCO file in its folder
+            numbers |= _coco_image_numbers(jsons[0])
+            files.remove(jsons[0])
+        numbers |= {n for n in (frame_number_of(p.stem) for p in files) if n is not None}
+    return frozenset(numbers)
+
+
+def _is_coco(path: Path) -> bool:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("images"), list)
+
+
+def _coco_image_numbers(path: Path) -> frozenset[int]:
+    """Frame numbers of the images a COCO file annotates (a LabelMe file: of its image); none when unreadable (the
+    labels stage then names the problem)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return frozenset()
+    if not isinstance(data, dict):
+        return frozenset()
+    names = [img.get("file_name") for img in data.get("images", []) if isinstance(img, dict)]
+    if isinstance(data.get("imagePath"), str):  # LabelMe
+        names.append(data["imagePath"])
+    numbers = (frame_number_of(Path(str(n)).stem) for n in names if n)
     return frozenset(n for n in numbers if n is not None)

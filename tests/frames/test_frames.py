@@ -241,6 +241,29 @@ def test_annotated_frames_win_their_window(blur_video: Path, tmp_path: Path) -> 
                  "--no-progress"]) == 2
 
 
+def test_annotated_frames_of_a_coco_file_or_object_folders_win_their_window(blur_video: Path, tmp_path: Path) -> None:
+    """What the labels stage reads names the frames kept first, whatever its format: a COCO file's images, one folder
+    of masks per object (each naming its frames its own way), LabelMe's one file per image."""
+    coco = tmp_path / "coco.json"
+    coco.write_text(json.dumps({"images": [{"id": 1, "file_name": f"images/IMG_{i}.jpg"} for i in (1, 8, 14)],
+                                "annotations": [], "categories": []}))
+    objects = tmp_path / "objects"
+    (objects / "door").mkdir(parents=True)
+    (objects / "drawer").mkdir()
+    for i in (1, 8):
+        (objects / "door" / f"frame_{i:05d}.png").write_bytes(b"")
+    (objects / "drawer" / "IMG_14.png").write_bytes(b"")
+    labelme = tmp_path / "labelme"
+    labelme.mkdir()
+    for i in (1, 8, 14):
+        (labelme / f"img{i}.json").write_text(json.dumps({"shapes": [], "imagePath": f"img{i}.jpg"}))
+    for name, annotations in (("coco", coco), ("objects", objects), ("labelme", labelme)):
+        out = tmp_path / f"frames_{name}"
+        assert main(["--video", str(blur_video), "--out", str(out), "--stride", "5", "--prefer-masked",
+                     str(annotations), "--no-progress"]) == 0
+        assert read_table(out)["source_index"].tolist() == [1, 8, 14, 19], name
+
+
 def _rotated_in_track_header(video: Path, out: Path) -> Path:
     """A copy of an MP4 whose track header says "display turned 90 degrees", as a phone filming upright writes it
     (the pixels stay landscape; players and OpenCV turn them)."""

@@ -62,7 +62,7 @@ def frames_selection(wildcards):
     args = [f" --count {c['count']}"] if c["count"] else []
     args += [f" --max-side {c['max_side']}"] if c["max_side"] else []
     scene = wildcards.scene
-    if source(scene) != "synthetic" and carries(scene, "masks") and Path(row(scene)["masks"]).is_dir():
+    if source(scene) != "synthetic" and carries(scene, "masks"):  # a mask folder or file: its frames kept first
         args.append(f" --prefer-masked {shlex.quote(row(scene)['masks'])}")
     return "".join(args)
 
