@@ -257,10 +257,10 @@ def test_annotated_frames_of_a_coco_file_or_object_folders_win_their_window(blur
     labelme.mkdir()
     for i in (1, 8, 14):
         (labelme / f"img{i}.json").write_text(json.dumps({"shapes": [], "imagePath": f"img{i}.jpg"}))
-    for name, annotations in (("coco", coco), ("objects", objects), ("labelme", labelme)):
+    for name, source in (("coco", coco), ("objects", objects), ("labelme", labelme)):
         out = tmp_path / f"frames_{name}"
         assert main(["--video", str(blur_video), "--out", str(out), "--stride", "5", "--prefer-masked",
-                     str(annotations), "--no-progress"]) == 0
+                     str(source), "--no-progress"]) == 0
         assert read_table(out)["source_index"].tolist() == [1, 8, 14, 19], name
 
 

@@ -37,6 +37,7 @@ def mixed_plan(tmp_path_factory):
         writer.write(np.full((24, 32, 3), 30 * i, np.uint8))
     writer.release()
     (root / "masks").mkdir()
+    (root / "masks" / "mapping.yaml").write_text("1: object0\n")  # the id maps' names, without language ('no')
     write_yaml(root / "keys.yaml", {"frame_00000": {"object0": 0.0}})
     wf = WorkflowCopy(root / "wf")
     wf.write_scenes([
@@ -172,6 +173,41 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
     assert "MissingInputException" not in run.output
 
 
+def test_rows_whose_items_cannot_go_together_are_refused_before_any_job(workflow_copy, tmp_path):
+    """What a stage would refuse after frames and COLMAP ran is refused when the sheet is read, with the sheet fix."""
+    video = tmp_path / "room.mp4"
+    video.write_bytes(b"")
+    maps, keys_dir = tmp_path / "maps", tmp_path / "keys"
+    maps.mkdir()
+    keys_dir.mkdir()
+    (maps / "frame_00000.png").write_bytes(b"")
+    keys = tmp_path / "keys.csv"
+    keys.write_text("frame,object,value\n0,door,0\n")
+    names = tmp_path / "names" / "mapping.yaml"  # not beside the masks, where the labels stage would find it
+    names.parent.mkdir()
+    names.write_text("1: door\n")
+    workflow_copy.write_scenes([
+        {"scene": "nomasks", "source": "video", "path": video, "masks": "no", "key_frames": keys, "names": "no"},
+        {"scene": "unnamed", "source": "video", "path": video, "masks": maps, "key_frames": keys, "names": "no"},
+        {"scene": "static", "source": "video", "path": video, "masks": "no", "key_frames": "no", "names": names},
+        {"scene": "ranges", "source": "video", "path": video, "masks": maps, "key_frames": keys, "names": names,
+         "state_ranges": "door=90,0;oven=0,1;lid=a,b"},
+        {"scene": "keydir", "source": "video", "path": video, "masks": maps, "key_frames": keys_dir, "names": names},
+        {"scene": "fine", "source": "video", "path": video, "masks": "no", "key_frames": keys, "names": "no",
+         "methods": "mk-planes"},
+    ])
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    out = run.output
+    assert "(scene 'nomasks'): column 'masks': 'no', but ['conerf', 'livescene'] learn which pixels" in out
+    assert "(scene 'unnamed'): column 'names': 'no', but the id maps of" in out
+    assert "(scene 'static'): column 'names': the row has neither masks nor key frames" in out
+    assert "'door=90,0' has LO 90 not below HI 0" in out and "'oven' is no object of" in out
+    assert "'lid=a,b' is not OBJECT=LO,HI" in out
+    assert "(scene 'keydir'): column 'key_frames':" in out and "is a folder; fix: give the key-frame file" in out
+    assert "(scene 'fine')" not in out
+
+
 def test_scene_sheet_comments_ragged_rows_empty_cells_and_an_empty_sheet(workflow_copy, tmp_path):
     room = tmp_path / "room #2"  # a "#" inside a path is not a comment
     room.mkdir()
@@ -201,8 +237,9 @@ def test_imported_colmap_model_replaces_sfm_and_prompts_reach_assembly(workflow_
     (truth / "truth" / "transforms.json").write_text("{}")
     for name in ("mapping.yaml", "prompts.yaml", "keys.yaml"):
         (tmp_path / name).write_text("{}")
+    (tmp_path / "masks").mkdir()
     workflow_copy.write_scenes([
-        {"scene": "shots", "source": "images", "path": shots, "poses": f"colmap:{model}", "masks": "no",
+        {"scene": "shots", "source": "images", "path": shots, "poses": f"colmap:{model}", "masks": tmp_path / "masks",
          "key_frames": tmp_path / "keys.yaml", "names": tmp_path / "mapping.yaml",
          "prompts": tmp_path / "prompts.yaml", "truth": truth, "methods": "livescene"}])
     jobs = workflow_copy.dry_run().scene_jobs("shots")
@@ -252,7 +289,9 @@ def test_state_ranges_reach_the_states_stage_and_are_checked(workflow_copy, tmp_
     video.write_bytes(b"")  # a dry run only needs the paths to exist
     keys.write_text("frame,object,value\n0,wardrobe,0\n")
     names.write_text("{1: wardrobe, 2: left drawer}")
-    row = {"source": "video", "path": video, "poses": "estimate", "masks": "no", "key_frames": keys, "names": names,
+    (tmp_path / "masks").mkdir()
+    row = {"source": "video", "path": video, "poses": "estimate", "masks": tmp_path / "masks", "key_frames": keys,
+           "names": names,
            "truth": "no", "methods": "livescene"}
     workflow_copy.write_scenes([{"scene": "filmed", "state_ranges": "wardrobe=0,95;left drawer=0,25", **row},
                                 {"scene": "plain", **row}])

@@ -112,6 +112,7 @@ def _row_problems(record):
         problems.append("column 'state_ranges': only key frames that the states stage interpolates are normalised "
                         "(a video, image-folder or synthetic source with key frames and estimated or imported poses); "
                         "fix: leave it empty for this row")
+    problems += _item_problems(record, kind, poses)
     truth = record.get("truth", "no")
     if truth == "yes" and kind != "synthetic":
         problems.append(f"column 'truth': 'yes' means a synthetic capture's own truth; for a {kind} source write "
@@ -120,6 +121,58 @@ def _row_problems(record):
         problems.append(f"column 'truth': {truth!r} is not 'yes', 'no' or a capture folder holding "
                         "truth/transforms.json; fix: write 'no' for a capture without truth, or the capture folder")
     return problems
+
+
+def _item_problems(record, kind, poses):
+    """Rows whose items cannot go together, refused before frames and COLMAP run rather than by a stage after them."""
+    problems = []
+    masks, keys, names = (record.get(c, ITEM_DEFAULTS[c]) for c in ("masks", "key_frames", "names"))
+    methods = [m.strip() for m in record.get("methods", ",".join(config["methods"])).split(",") if m.strip()]
+    if keys not in ("yes", "no") and Path(keys).is_dir():
+        problems.append(f"column 'key_frames': {keys!r} is a folder; fix: give the key-frame file "
+                        "(key_frame_value.yaml, annotations.yml or a CSV)")
+    if not frames_assembled(kind, poses):
+        return problems
+    needs_masks = sorted(set(methods) & {"livescene", "conerf"})
+    if masks == "no" and keys != "no" and needs_masks:
+        problems.append(f"column 'masks': 'no', but {needs_masks} learn which pixels each object drives from its "
+                        "masks; fix: give the mask folder or file, or list only methods that train without masks "
+                        "(mk-planes, mk-planes-star, k-planes) in column 'methods'")
+    if masks == "no" and keys == "no" and names != "no":
+        problems.append("column 'names': the row has neither masks nor key frames, so it trains as a static room "
+                        "with no object to name; fix: write 'no'")
+    if names == "no" and masks not in ("yes", "no") and Path(masks).is_dir() and not any(
+            (Path(masks) / sub / f"mapping.{ext}").is_file() for sub in ("", "..") for ext in ("yaml", "yml")) \
+            and not any(d.is_dir() and not d.name.startswith(".") for d in Path(masks).iterdir()):
+        problems.append(f"column 'names': 'no', but the id maps of {masks!r} number their objects and no "
+                        "mapping.yaml beside them names the numbers; fix: give the mapping.yaml ({id: name}) in "
+                        "column 'names' (the names also turn on the language rules)")
+    for item in (i.strip() for i in record.get("state_ranges", "").split(";") if i.strip()):
+        name, _, bounds = item.partition("=")
+        try:
+            lo, hi = (float(b) for b in bounds.split(","))
+        except ValueError:
+            problems.append(f"column 'state_ranges': {item!r} is not OBJECT=LO,HI; fix: write e.g. fridge=0,110")
+            continue
+        if not lo < hi:
+            problems.append(f"column 'state_ranges': {item!r} has LO {lo:g} not below HI {hi:g}; fix: write the "
+                            "closed value first, e.g. fridge=0,110")
+        known = _mapping_names(names)
+        if known is not None and name.strip() != "*" and name.strip() not in known:
+            problems.append(f"column 'state_ranges': {name.strip()!r} is no object of {names!r} ({sorted(known)}); "
+                            "fix: use the names of the mapping.yaml, or * for every object")
+    return problems
+
+
+def _mapping_names(names):
+    """The object names a row's names file gives, or None when it gives none to check against."""
+    if names in ("", "yes", "no"):
+        return None
+    try:
+        data = yaml.safe_load(Path(names).read_text())
+    except (OSError, yaml.YAMLError):
+        return None
+    return {str(v) for v in data.values()} if isinstance(data, dict) else None
 
 
 def _sheet_table(sheet_path):
