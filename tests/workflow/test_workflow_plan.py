@@ -194,7 +194,8 @@ def test_rows_whose_items_cannot_go_together_are_refused_before_any_job(workflow
          "state_ranges": "door=90,0;oven=0,1;lid=a,b"},
         {"scene": "keydir", "source": "video", "path": video, "masks": maps, "key_frames": keys_dir, "names": names},
         {"scene": "fine", "source": "video", "path": video, "masks": "no", "key_frames": keys, "names": "no",
-         "methods": "mk-planes"},
+         "methods": "mk-planes, k-planes"},  # spaces after the commas, as one writes a list
+        {"scene": "ready", "source": "dataset", "path": maps, "poses": "given", "masks": "no", "prompts": keys},
     ])
     run = workflow_copy.snakemake("-n", "--cores", "1")
     assert run.code != 0
@@ -206,6 +207,12 @@ def test_rows_whose_items_cannot_go_together_are_refused_before_any_job(workflow
     assert "'lid=a,b' is not OBJECT=LO,HI" in out
     assert "(scene 'keydir'): column 'key_frames':" in out and "is a folder; fix: give the key-frame file" in out
     assert "(scene 'fine')" not in out
+    assert "(scene 'ready'): column 'masks': 'no', but a ready dataset's masks are part of it" in out
+    assert "(scene 'ready'): column 'prompts': a ready dataset's prompts are its prompts.yaml" in out
+    sheet = workflow_copy.root / "config" / "scenes.tsv"
+    sheet.write_text(sheet.read_text().replace("\t", ","))
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0 and "the header line has commas but no tab" in run.output
 
 
 def test_scene_sheet_comments_ragged_rows_empty_cells_and_an_empty_sheet(workflow_copy, tmp_path):

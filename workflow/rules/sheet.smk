@@ -131,6 +131,14 @@ def _item_problems(record, kind, poses):
     if keys not in ("yes", "no") and Path(keys).is_dir():
         problems.append(f"column 'key_frames': {keys!r} is a folder; fix: give the key-frame file "
                         "(key_frame_value.yaml, annotations.yml or a CSV)")
+    if kind == "dataset":  # a ready dataset's masks and prompts are files of it, which the rules read as they are
+        if masks != "yes":
+            problems.append(f"column 'masks': {masks!r}, but a ready dataset's masks are part of it (masks/); fix: "
+                            "write 'yes', or remove masks/ from a copy of the dataset")
+        prompts = record.get("prompts", "")
+        if prompts not in ("", "yes", "no"):
+            problems.append(f"column 'prompts': a ready dataset's prompts are its prompts.yaml, and {prompts!r} "
+                            "would not be read; fix: copy it into the dataset folder as prompts.yaml and write 'yes'")
     if not frames_assembled(kind, poses):
         return problems
     needs_masks = sorted(set(methods) & {"livescene", "conerf"})
@@ -188,6 +196,9 @@ def _sheet_table(sheet_path):
                             "one row per scene (docs/workflow.md, 'The scene sheet')")
     (_, header_line), *body = lines
     header = next(csv.reader([header_line], delimiter="\t"))
+    if len(header) == 1 and "," in header_line:
+        raise WorkflowError(f"{sheet_path}: the header line has commas but no tab; the scene sheet is tab-separated; "
+                            "fix: separate the cells with tabs (a spreadsheet's 'tab-separated values' export)")
     rows, numbers, problems = [], [], []
     for n, line in body:
         cells = next(csv.reader([line], delimiter="\t"))
@@ -197,7 +208,10 @@ def _sheet_table(sheet_path):
             continue
         rows.append(cells + [""] * (len(header) - len(cells)))
         numbers.append(n)
-    return pd.DataFrame(rows, columns=header, dtype=str), numbers, problems
+    table = pd.DataFrame(rows, columns=header, dtype=str)
+    if "methods" in table:  # "livescene, mk-planes", as one writes a list
+        table["methods"] = table["methods"].str.replace(r"\s*,\s*", ",", regex=True).str.strip()
+    return table, numbers, problems
 
 
 def _read_scene_sheet(path):
