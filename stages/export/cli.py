@@ -58,9 +58,17 @@ def main(argv: list[str] | None = None) -> int:
     options.check()
     run = load_run(args.run, device=args.device)
     combos = [parse_state_string(s, run.objects) for s in args.states]
+    run.warn_if_states_unread([name for combo in combos for name in combo])
     dataset = read_scene(dataset_of_run(args.run, args.data), validate=False)
     doc = export_run(run, dataset, combos, args.out, options, progress=not args.no_progress,
                      run_info={"run": str(args.run), "method": run.method, "step": run.step})
+    empty = [r["states"] for r in doc["exports"] if r["files"]["scene_mesh"]["vertices"] == 0]
+    if empty:  # nothing above the density threshold: what a run of too few steps gives
+        import warnings
+
+        warnings.warn(f"{args.out}: the scene mesh is empty at {len(empty)} of {len(doc['exports'])} state "
+                      f"combinations (e.g. {empty[0]}): the run ({run.step} steps) has no surface dense enough to "
+                      "mesh, as an undertrained run; fix: train it longer (the workflow's 1500 steps)", stacklevel=2)
     summary = {"out": args.out, "total_seconds": doc["total_seconds"],
                "exports": [{"states": r["states"], "scene_vertices": r["files"]["scene_mesh"]["vertices"],
                             "seconds": r["timings_s"]["total"]} for r in doc["exports"]]}

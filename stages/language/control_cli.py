@@ -129,6 +129,7 @@ def _control(args: argparse.Namespace) -> int:
         path = Path(args.out or "control.png")
         guard_output_file(path, "the control render", suffixes=(".png",), inputs=[args.run, ds.root])
         run = open_run(args.run, args.device)
+        run.warn_if_states_unread(result.states)
         out = run.render(ds.camera_of(frame), frame.c2w, result.states, frame_index=ds.frames.index(frame))
         rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)
         with atomic_path(path, suffix=".png") as tmp:

@@ -147,6 +147,7 @@ def _render_video(args: argparse.Namespace) -> int:
     check_frames_dir(frames_dir)
     check_video_codec(args.out, args.codec)
     run = load_run(args.run, device=args.device)
+    run.warn_if_states_unread(parse_state_assignments(args.state) or ([args.states_sweep] if args.states_sweep else []))
     cp = _video_path(args, run)
     model = Path(args.run) / "model.pt"
     run_id = {"run": str(Path(args.run).resolve()), "step": run.step, "model_bytes": model.stat().st_size,
@@ -181,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         c2w = _parse_matrix(args.pose_matrix)
         camera = read_scene(dataset_of_run(args.run, args.data), validate=False).camera
+    run.warn_if_states_unread(parse_state_assignments(args.state))
     out = run.render(camera, c2w, parse_state_assignments(args.state) or None, frame_index=frame_index)
     state = run.state_vector(parse_state_assignments(args.state) or None, frame_index)
     with atomic_dir(args.out, "render", inputs=[args.run], legacy=["render.yaml"]) as tmp:

@@ -74,6 +74,16 @@ class LoadedRun:
     def state_mode(self) -> str:
         return self.config.model.state.mode
 
+    def warn_if_states_unread(self, states: Collection[str] | Mapping[str, float] | None) -> None:
+        """Say on stderr when object states are asked of a method that reads none: K-Planes' fourth axis is the
+        frame's time (docs/baselines.md), so its images are the same at any state vector."""
+        if self.method == "k-planes" and states:
+            import warnings
+
+            warnings.warn(f"{self.run_dir}: a k-planes run reads no object state (its fourth axis is the frame's "
+                          "time), so the states given change nothing; fix: render a run of livescene, mk-planes or "
+                          "conerf to set object states", stacklevel=2)
+
     @property
     def exposure_gains(self) -> dict[str, list[float]] | None:
         """Every frame's measured log gains per channel when the run was trained on them (``exposure.json``),

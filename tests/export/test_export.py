@@ -225,3 +225,27 @@ def test_all_sets_every_object_the_string_does_not_name():
         parse_state_string("all=1,all=0", objects)
     with pytest.raises(InputError, match=r"not in \[0, 1\]"):
         parse_state_string("all=2", objects)
+
+
+def test_an_empty_mesh_and_states_a_method_cannot_read_are_said(tiny_capture_dataset, tmp_path, capsys):
+    """An undertrained run's empty mesh is not a silent success, and a k-planes run (time, not states, on its fourth
+    axis) is said to ignore the states asked of it."""
+    import torch
+
+    from stages.model import load_config
+    from stages.model.tiny_overrides import TINY_MODEL_OVERRIDES
+    from stages.model.trainer import Trainer
+
+    torch.set_num_threads(1)
+    run = tmp_path / "kplanes"
+    overrides = [*TINY_MODEL_OVERRIDES, "train.batch_rays=64", "train.warmup_steps=2", "train.eval_every=100",
+                 "train.eval_rays=64", "train.checkpoint_every=100", "train.render_chunk=1024", "train.threads=1",
+                 "train.max_steps=2"]
+    config = load_config("cpu-demo", overrides, method="k-planes", data=str(tiny_capture_dataset[1].root), seed=0)
+    Trainer(config, run, device="cpu", progress=False).train()
+    with pytest.warns(UserWarning) as said:
+        assert export_main(["--run", str(run), "--states", "cabinet=1", "--views", "1", "--scale", "0.25",
+                            "--out", str(tmp_path / "out"), "--no-progress"]) == 0
+    messages = " | ".join(str(w.message) for w in said)
+    assert "a k-planes run reads no object state" in messages
+    assert "the scene mesh is empty at 1 of 1 state combinations" in messages and "train it longer" in messages

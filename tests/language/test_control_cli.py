@@ -22,6 +22,9 @@ class _FakeRun:
         self.objects = objects
         self.calls = []
 
+    def warn_if_states_unread(self, states):  # a method that reads states
+        pass
+
     def render(self, camera, c2w, states, frame_index=None):
         self.calls.append((frame_index, dict(states)))
         h, w = camera.height, camera.width
