@@ -102,8 +102,26 @@ def _control(args: argparse.Namespace) -> int:
     elif args.from_frame or args.frame:
         raise InputError("--from-frame/--frame", "a frame needs a scene dataset, and none was given",
                          "pass --data DS or --run RUN instead of --objects, or the starting states with --state")
+    run = None
+    if args.run:
+        assert ds is not None
+        from stages.model.run import open_run
+        from stages.scene import guard_output_file
+
+        guard_output_file(args.out or "control.png", "the control render", suffixes=(".png",),
+                          inputs=[args.run, ds.root])
+
+        run = open_run(args.run, args.device)
+        # the run's frames are the dataset's: a frame's index (its learned state, its time) means the same frame
+        if run.frame_ids and [f.frame_id for f in ds.frames] != run.frame_ids:
+            raise InputError(ds.root, "is not the dataset the run was trained on (its frames differ from the run's)",
+                             "pass --data the run's dataset, or leave --data out to use it")
     current = dict.fromkeys(vocabulary.objects, 0.0)
-    if args.from_frame and frame is not None and frame.state:
+    if args.from_frame and frame is not None and run is not None:  # the states the run renders there (learned too)
+        assert ds is not None
+        vector = run.state_vector(None, ds.frames.index(frame))
+        current.update({k: float(v) for k, v in zip(run.objects, vector, strict=True) if k in current})
+    elif args.from_frame and frame is not None and frame.state:
         current.update({k: v for k, v in frame.state.items() if k in current})
     current.update(parse_state_assignments(args.state))
     result = parser.parse(args.command, current)
@@ -118,17 +136,14 @@ def _control(args: argparse.Namespace) -> int:
                 lo, hi = b["training_range"]
                 print(f"note: {name} at {b['state']:.2f} is beyond the states its training frames show "
                       f"({lo:.2f} to {hi:.2f}): the render extrapolates", file=sys.stderr)
-    if args.run:
+    if run is not None:
         assert ds is not None and frame is not None
         import cv2
         import numpy as np
 
-        from stages.model.run import open_run
-        from stages.scene import atomic_path, guard_output_file
+        from stages.scene import atomic_path
 
         path = Path(args.out or "control.png")
-        guard_output_file(path, "the control render", suffixes=(".png",), inputs=[args.run, ds.root])
-        run = open_run(args.run, args.device)
         run.warn_if_states_unread(result.states)
         out = run.render(ds.camera_of(frame), frame.c2w, result.states, frame_index=ds.frames.index(frame))
         rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)

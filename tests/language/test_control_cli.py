@@ -18,9 +18,13 @@ from stages.model import run as model_run_module
 class _FakeRun:
     """The model API; the image's grey level is the first object's state so the render shows the command."""
 
-    def __init__(self, objects):
+    def __init__(self, objects, frame_ids=()):
         self.objects = objects
+        self.frame_ids = list(frame_ids)  # empty: not checked against the dataset
         self.calls = []
+
+    def state_vector(self, states, frame_index=None):  # a learned state of its own at every frame
+        return np.full(len(self.objects), 0.25)
 
     def warn_if_states_unread(self, states):  # a method that reads states
         pass
@@ -69,6 +73,23 @@ def test_control_with_a_run_renders_the_result(tiny_dataset, tmp_path, monkeypat
     assert fake.calls == [(0, report["states"])]
     img = cv2.imread(str(out_png))
     assert img.shape == (12, 16, 3) and int(img[0, 0, 0]) == 128
+
+
+def test_control_from_a_frame_starts_from_the_runs_states_and_needs_its_dataset(tiny_dataset, tmp_path, monkeypatch,
+                                                                                capsys):
+    """--from-frame with a run starts from what the run renders there (learned states too), and a dataset of other
+    frames than the run's (whose frame index would mean another frame) is refused."""
+    fake = _FakeRun(tiny_dataset.objects, [f.frame_id for f in tiny_dataset.frames])
+    monkeypatch.setattr(model_run_module, "open_run", lambda run, device="cpu": fake)
+    (tmp_path / "run").mkdir()
+    args = ["--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root), "--no-encoder", "--from-frame",
+            "--out", str(tmp_path / "c.png"), "open object1"]
+    assert control_cli.main(args) == 0
+    states = json.loads(capsys.readouterr().out)["states"]
+    assert states == {"object0": 0.25, "object1": 1.0, "object2": 0.25}  # the run's 0.25, not the dataset's
+    fake.frame_ids = ["99999", *fake.frame_ids[1:]]
+    assert control_cli.main(args) == 2
+    assert "is not the dataset the run was trained on" in capsys.readouterr().err
 
 
 def test_control_names_a_state_beyond_the_training_frames(tiny_dataset):
