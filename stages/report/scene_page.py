@@ -430,7 +430,7 @@ def section_sliders(sd: SceneData) -> tuple[str, dict[str, list[str]]]:
     blocks, images = [], {}
     ranges = (sd.dataset_info or {}).get("state_ranges") or {}
     for m in sd.methods:
-        if m.sweep is None or m.sweep_dir is None:
+        if m.sweep is None or m.sweep_dir is None or not m.sweep.get("objects"):  # a static room has no slider
             continue
         blocks.append(f"<h3>{escape(m.name)} (view {escape(str(m.sweep.get('frame')))}, other objects at the "
                       f"view's state)</h3>")
@@ -447,6 +447,8 @@ def section_sliders(sd: SceneData) -> tuple[str, dict[str, list[str]]]:
                 f'<output id="{key}-value">{values[0]:.2f}</output></label><br>'
                 f'<img id="{key}" src="{uris[0]}" alt="{escape(m.name)} {escape(obj)} sweep"></div>')
     if not blocks:
+        if not (sd.dataset_info or {}).get("objects", True):
+            return missing("the scene has no objects, so there is no state to slide"), images
         first = sd.methods[0].name if sd.methods else "livescene"
         return missing(_why_skipped(sd, f"sweep[{first}]")), images
     return "".join(blocks), images

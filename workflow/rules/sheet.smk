@@ -64,13 +64,18 @@ def _names_objects(mapping):
     return isinstance(names, dict) and bool(names)
 
 
+def _relative_note(value):
+    """Where a relative path of the sheet was looked for: the folder snakemake runs in, not the sheet's."""
+    return "" if Path(value).is_absolute() else f" (relative paths are read from {Path.cwd()}, where snakemake runs)"
+
+
 def _row_problems(record):
     """What the schema cannot say about one row: which values suit its source, and that paths exist."""
     kind, poses = record["source"], record.get("poses", "estimate")
     problems = []
     if not Path(record["path"]).exists():
-        problems.append(f"column 'path': {record['path']!r} does not exist; fix: give the capture spec, video, "
-                        "image folder or dataset folder")
+        problems.append(f"column 'path': {record['path']!r} does not exist{_relative_note(record['path'])}; fix: "
+                        "give the capture spec, video, image folder or dataset folder")
     if kind == "dataset" and poses != "given":
         problems.append("column 'poses': a ready dataset carries its poses; write 'given'")
     if kind in ("video", "images") and poses == "given":
@@ -92,8 +97,8 @@ def _row_problems(record):
             problems.append(f"column {column!r}: {empty}'yes' means the source itself holds it (a synthetic capture "
                             f"or a ready dataset); for a {kind} source write 'no' or the path of the file or folder")
         elif value not in ("", "yes", "no") and not Path(value).exists():
-            problems.append(f"column {column!r}: {value!r} does not exist; fix: give an existing file or folder, "
-                            "or write 'no'")
+            problems.append(f"column {column!r}: {value!r} does not exist{_relative_note(value)}; fix: give an "
+                            "existing file or folder, or write 'no'")
     # masks make objects; their states come only from key frames (the states stage, or learned between key
     # frames): refused here rather than by the trainer after frames, COLMAP and labels have run
     if frames_assembled(kind, poses) and record.get("masks", "yes") != "no" and record.get("key_frames", "yes") == "no":
