@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import yaml
 
-from stages.scene import Camera, InputError, atomic_dir, guard_output_file, read_scene
+from stages.scene import Camera, InputError, SceneError, atomic_dir, guard_output_file, read_scene
 from stages.scene.cli_errors import cli_errors
 from stages.scene.state_values import parse_state_assignments
 from stages.scene.transforms import parse_pose
@@ -73,7 +73,12 @@ def _parse_matrix(text: str) -> np.ndarray:
     except (ValueError, json.JSONDecodeError) as exc:
         raise InputError("--pose-matrix", f"cannot read a 4x4 matrix from {text!r}",
                          "give 16 numbers, row major, or a JSON [[...], ...] list") from exc
-    return parse_pose(m, Path("--pose-matrix"), "the camera-to-world matrix")  # finite and rigid, as in a dataset
+    try:  # finite and rigid, as in a dataset; the fix spoken to the command line, not to a transforms.json
+        return parse_pose(m, Path("--pose-matrix"), "the camera-to-world matrix")
+    except SceneError as exc:
+        raise InputError("--pose-matrix", exc.problem.replace("transform_matrix", "the matrix"),
+                         "give a finite rigid camera-to-world matrix (rotation without scale, last row 0 0 0 1)") \
+            from None
 
 
 def _write_png(path: Path, img: np.ndarray) -> None:

@@ -117,7 +117,9 @@ class LoadedRun:
         if isinstance(states, Mapping):
             unknown = sorted(set(states) - set(self.objects))
             if unknown:
-                raise InputError(self.run_dir, f"unknown objects {unknown} in the state", f"use {self.objects}")
+                raise InputError(self.run_dir, f"unknown objects {unknown} in the state",
+                                 f"use {self.objects}" if self.objects else "give no state: this run's scene has "
+                                 "no objects")
             out = base.copy()
             for j, name in enumerate(self.objects):
                 if name in states:

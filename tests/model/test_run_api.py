@@ -54,7 +54,9 @@ def test_render_cli_writes_images(trained_run, tiny_dataset, tmp_path, capsys):
                          (["--pose-matrix", "0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1"], "not orthonormal")):
         pose = [] if "--pose-matrix" in bad else ["--pose-matrix", matrix]
         assert render_main(["--run", str(trained_run), *pose, *bad, "--out", str(tmp_path / "bad")]) == 2
-        assert message in capsys.readouterr().err
+        err = capsys.readouterr().err
+        assert message in err
+        assert "--pose-matrix" not in bad or "fix: give a finite rigid camera-to-world matrix" in err
     assert not (tmp_path / "bad").exists()
     bad = ["--run", str(trained_run), "--pose", f"{tiny_dataset.root}/transforms.json:frame_00001", "--out", str(out)]
     assert render_main(bad) == 2
