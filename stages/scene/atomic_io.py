@@ -103,6 +103,21 @@ def _marker_stage(folder: Path) -> str | None:
         return None
 
 
+def _overlap(path: Path, inputs: Sequence[str | Path | None], *, folder: bool) -> str | None:
+    """How ``path`` meets one of ``inputs`` (None: not given), or None: it is one, or, as a ``folder`` output that
+    is replaced as a whole, holds one, or, as a file output, lies inside one (a run's weights, a dataset's images)."""
+    target = path.resolve()
+    for item in filter(None, inputs):
+        src = Path(item).resolve()
+        if src == target:
+            return f"is the input {item}"
+        if folder and target in src.parents:
+            return f"holds the input {item}"
+        if not folder and src in target.parents:
+            return f"lies inside the input {item}"
+    return None
+
+
 def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Path | None] = (),
                      legacy: Sequence[str] = (), force: bool = False) -> None:
     """Refuse an output folder whose replacement would delete something that is not ``stage``'s own output.
@@ -114,13 +129,10 @@ def guard_output_dir(path: str | Path, stage: str, *, inputs: Sequence[str | Pat
     holds one. Call it before long work, so that a bad ``--out`` fails at once; ``atomic_dir`` calls it again.
     """
     path = Path(path)
-    target = path.resolve()
-    for item in filter(None, inputs):
-        src = Path(item).resolve()
-        if src == target or target in src.parents:
-            what = "is the input" if src == target else "holds the input"
-            raise InputError(path, f"{what} {item}: the {stage} output replaces this folder as a whole",
-                             "choose another --out, outside the inputs")
+    found_input = _overlap(path, inputs, folder=True)
+    if found_input is not None:
+        raise InputError(path, f"{found_input}: the {stage} output replaces this folder as a whole",
+                         "choose another --out, outside the inputs")
     if not path.exists() and not path.is_symlink():
         return
     if path.is_symlink():  # replacing it would drop the link and leave its target as it was: say so instead
@@ -149,13 +161,10 @@ def guard_output_file(path: str | Path, what: str, *, suffixes: Sequence[str],
     if path.suffix.lower() not in suffixes:
         raise InputError(path, f"is no {'/'.join(suffixes)} file name; {what} is written here",
                          f"give --out a name ending in {suffixes[0]}")
-    target = path.resolve()
-    for item in filter(None, inputs):
-        src = Path(item).resolve()
-        if src == target or src in target.parents:
-            where = "is the input" if src == target else "lies inside the input"
-            raise InputError(path, f"{where} {item}; writing {what} there would overwrite it or add to it",
-                             "choose an --out outside the inputs")
+    found_input = _overlap(path, inputs, folder=False)
+    if found_input is not None:
+        raise InputError(path, f"{found_input}; writing {what} there would overwrite it or add to it",
+                         "choose an --out outside the inputs")
     if path.is_dir():
         raise InputError(path, "is a folder, and this output is a file", "give a file name (e.g. inside that folder)")
 
