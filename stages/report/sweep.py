@@ -37,10 +37,16 @@ def render_sweeps(run_dir: str | Path, data_dir: str | Path, out_dir: str | Path
     frames = ds.frames_in("test") or ds.frames
     frame = frames[0] if frame_id is None else ds.frame_by_id(frame_id)
     run = load_run(run_dir, device=device)
+    if run.frame_ids and [f.frame_id for f in ds.frames] != run.frame_ids:  # a frame index would mean another frame
+        raise InputError(data_dir, "is not the dataset the run was trained on (its frames differ from the run's)",
+                         "pass the run's dataset")
     camera = ds.camera_of(frame).scaled(scale) if scale != 1 else ds.camera_of(frame)
-    base = {name: float((frame.state or {}).get(name, 0.0)) for name in run.objects}
-    values = np.linspace(0.0, 1.0, steps).round(4).tolist()
     index = ds.frames.index(frame)
+    if run.state_mode == "learned":  # the other objects at the states the run renders there, not the dataset's
+        base = {name: float(v) for name, v in zip(run.objects, run.state_vector(None, index), strict=True)}
+    else:
+        base = {name: float((frame.state or {}).get(name, 0.0)) for name in run.objects}
+    values = np.linspace(0.0, 1.0, steps).round(4).tolist()
     summary: dict = {"run": str(run_dir), "dataset": str(data_dir), "frame": frame.frame_id, "scale": scale,
                      "width": camera.width, "height": camera.height, "base_state": base, "objects": {}}
     start = time.perf_counter()
@@ -51,7 +57,8 @@ def render_sweeps(run_dir: str | Path, data_dir: str | Path, out_dir: str | Path
             out = run.render(camera, frame.c2w, states, frame_index=index)
             rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)
             file = f"{slug(name)}_{k:02d}.png"
-            cv2.imwrite(str(tmp / file), rgb)
+            if not cv2.imwrite(str(tmp / file), rgb):
+                raise OSError(f"could not write {tmp / file}")
             entry = summary["objects"].setdefault(name, {"values": values, "images": []})
             entry["images"].append(file)
         summary["seconds"] = round(time.perf_counter() - start, 3)

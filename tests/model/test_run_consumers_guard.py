@@ -62,3 +62,21 @@ def test_a_cuda_device_without_cuda_is_named(trained_run: Path, capsys):
         pytest.skip("this machine has CUDA")
     assert render_main(["--run", str(trained_run), "--orbit", "--out", "x.mp4", "--device", "cuda"]) == 2
     assert "CUDA requested but torch sees no GPU" in capsys.readouterr().err
+
+
+def test_a_sweep_refuses_a_dataset_of_other_frames_than_the_runs(trained_run: Path, tiny_dataset, tmp_path: Path):
+    import shutil
+
+    from stages.report.sweep import render_sweeps
+
+    other = tmp_path / "other"
+    shutil.copytree(tiny_dataset.root, other)
+    data = json.loads((other / "transforms.json").read_text())
+    data["frames"] = data["frames"][1:]  # one frame fewer: every later frame index now names the next frame
+    (other / "key_frame_value.yaml").unlink(missing_ok=True)
+    for key in ("train_filenames", "val_filenames", "test_filenames"):
+        data.pop(key, None)
+    (other / "transforms.json").write_text(json.dumps(data))
+    with pytest.raises(InputError, match="is not the dataset the run was trained on"):
+        render_sweeps(trained_run, other, tmp_path / "sweep", steps=2, scale=0.5, progress=False)
+    assert not (tmp_path / "sweep").exists()
