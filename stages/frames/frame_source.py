@@ -224,7 +224,7 @@ class ImageFolderSource:
                 first[n] = p
             pairs = sorted(zip(numbers, files, strict=True))
             self.files = [p for _, p in pairs]
-            self.indices = [int(i) for i, _ in pairs]
+            self.indices = [n for n, _ in pairs]
         else:  # some names carry no number: playback order = name order, numbers in names compared as numbers
             self.files = sorted(files, key=_natural_key)
             self.indices = list(range(len(files)))
