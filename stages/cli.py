@@ -74,8 +74,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     use_passive_openmp_wait()
     warnings.formatwarning = _one_line_warning
-    module = importlib.import_module(commands[name][0])
-    return int(module.main(rest) or 0)
+    from stages.scene.cli_errors import cli_errors  # here, not at the top: `livescene --help` stays fast
+
+    # Ctrl-C while a command (or its imports) runs: one line, for commands without their own wrapper too
+    return cli_errors()(_run_command)(commands[name][0], rest)
+
+
+def _run_command(module_name: str, argv: list[str]) -> int:
+    module = importlib.import_module(module_name)
+    return int(module.main(argv) or 0)
 
 
 def _one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,

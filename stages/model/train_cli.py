@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 
 from stages.scene.cli_errors import ErrorExit, cli_errors
@@ -52,10 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress,
                       restart_stale=args.restart_stale)
     summary = trainer.train()
-    if summary.get("status") == "sigterm":
-        print(f"stopped by SIGTERM at step {summary['step']}; checkpoint saved, resume with --resume",
-              file=sys.stderr)
-        return 143
+    if summary.get("status") == "sigterm":  # SIGTERM, Ctrl-C or a closed terminal: the run is left resumable
+        sig = trainer.stop_signal or signal.SIGTERM
+        print(f"stopped by {signal.Signals(sig).name} at step {summary['step']}; checkpoint saved, resume with "
+              "--resume", file=sys.stderr)
+        return 128 + int(sig)
     print(json.dumps({k: summary[k] for k in ("method", "status", "steps", "train_seconds", "eval_psnr",
                                               "peak_memory_mib")}))
     return 0

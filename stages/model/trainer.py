@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import errno
 import math
 import random
 import resource
+import shutil
 import signal
 import sys
 import time
@@ -72,6 +74,10 @@ class PendingStep:
     """[parameters with a gradient]: whether each gradient is finite."""
     wall_s: float
     lr: float
+
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGINT", "SIGHUP") if hasattr(signal, name))
+"""Signals that stop a training through its normal exit with a checkpoint (docs/model.md "Run folder")."""
 
 
 def resolve_device(name: str | torch.device) -> torch.device:
@@ -173,7 +179,12 @@ def save_atomically(obj: Any, path: Path) -> None:
     """``torch.save`` through a temporary file renamed onto ``path``. Saved to a file object, the archive's records
     are named "archive/..." rather than after the temporary file, so identical runs write identical bytes."""
     with atomic_path(path, suffix=".pt") as tmp, tmp.open("wb") as fh:
-        torch.save(obj, fh)
+        try:
+            torch.save(obj, fh)
+        except RuntimeError as exc:  # torch's archive writer reports a full disk as "unexpected pos ..."
+            if shutil.disk_usage(path.parent).free < 64 * 2**20:
+                raise OSError(errno.ENOSPC, "no space left on the device", str(path)) from exc
+            raise
 
 
 class Trainer:
@@ -189,6 +200,8 @@ class Trainer:
         """With ``resume``: a checkpoint of other inputs is discarded and training starts over (else an error)."""
         self.progress = progress
         self._stop_reason: str | None = None
+        self.stop_signal: int | None = None
+        """The signal that stopped the run (SIGTERM, SIGINT, SIGHUP), None when none did."""
         self.amp_dtype = autocast_dtype(config.train.mixed_precision, self.device)
         self._setup()
 
@@ -567,7 +580,10 @@ class Trainer:
         """
         self._stop_reason = reason
 
-    def _on_sigterm(self, signum: int, frame: Any) -> None:
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        """SIGTERM (a scheduler), SIGINT (Ctrl-C) and SIGHUP (a closed terminal) alike: stop before the next step,
+        save a checkpoint and leave the run resumable (run.json status "sigterm", whichever signal it was)."""
+        self.stop_signal = signum
         self.request_stop("sigterm")
 
     def _write_log(self) -> None:
@@ -587,11 +603,19 @@ class Trainer:
             raise InputError(self.out, "already holds checkpoints of a run",
                              "pass --resume to continue it, or choose a new --out folder")
         write_yaml(self.out / "config.yaml", cfg.to_dict())
-        old_handler = None
-        try:
-            old_handler = signal.signal(signal.SIGTERM, self._on_sigterm)
+        handlers = {}
+        try:  # held until the run's last checkpoint is written: a second signal during the save changes nothing
+            for sig in STOP_SIGNALS:
+                handlers[sig] = signal.signal(sig, self._on_signal)
         except ValueError:  # not the main thread: no signal handling
-            old_handler = None
+            pass
+        try:
+            return self._train(cfg)
+        finally:
+            for sig, handler in handlers.items():
+                signal.signal(sig, handler)
+
+    def _train(self, cfg: RunConfig) -> dict[str, Any]:
         if self.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(self.device)
         t0 = self._t0 = time.perf_counter()
@@ -648,8 +672,6 @@ class Trainer:
             read_back()
         finally:
             bar.close()
-            if old_handler is not None:
-                signal.signal(signal.SIGTERM, old_handler)
         wall = self.wall_before + time.perf_counter() - t0
         if status != "completed" and self.log_rows and cfg.train.eval_every > 0:
             last_psnr = self.evaluate()

@@ -2,8 +2,9 @@
 
 An ``InputError`` (stages/scene/errors.py) already says which file is wrong and how to fix it, so a
 traceback would only bury that line; the workflow's logs and a person at a terminal both read
-``error: <file>: <problem>; fix: <fix>`` and exit status 2. Anything else is a bug or a crash and keeps
-its traceback: the wrapper never catches it.
+``error: <file>: <problem>; fix: <fix>`` and exit status 2. So is what the machine refuses (a full disk, a
+folder one may not write to), and Ctrl-C ends with one line and status 130. Anything else is a bug or a crash
+and keeps its traceback: the wrapper never catches it.
 
     @cli_errors()
     def main(argv: list[str] | None = None) -> int: ...
@@ -14,10 +15,13 @@ its traceback: the wrapper never catches it.
 
 from __future__ import annotations
 
+import errno
 import functools
+import re
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ParamSpec
 
 from .errors import InputError
@@ -25,7 +29,31 @@ from .errors import InputError
 EXIT_USER_ERROR = 2
 """Exit status of a CLI refusing its input (argparse uses 2 for bad arguments too)."""
 
+EXIT_INTERRUPTED = 130
+"""Exit status after Ctrl-C (128 + SIGINT, as a shell reports it)."""
+SYSTEM_FIXES = {
+    errno.ENOSPC: "free disk space there, or choose an --out on another disk",
+    errno.EDQUOT: "free space in your quota, or choose an --out elsewhere",
+    errno.EACCES: "choose an --out in a folder you may write to",
+    errno.EPERM: "choose an --out in a folder you may write to",
+    errno.EROFS: "choose an --out on a writable disk",
+}
+"""What the machine refuses (a full disk, a folder one may not write to), said as such with its fix."""
+_TEMPORARY = re.compile(r"^\.(.+)\.\d+\.(?:old\.)?[a-z0-9_]{8}(?:\.[^.]*)?$")
+
 P = ParamSpec("P")
+
+
+def output_of(filename: str | None) -> str:
+    """The output a failed write was for: a path inside an atomic write's hidden temporary (``.frames.123.abcd1234``)
+    named by the output it was to become (``frames``)."""
+    if not filename:
+        return "the output"
+    parts = list(Path(str(filename)).parts)
+    for i, part in enumerate(parts):
+        if m := _TEMPORARY.match(part):
+            return str(Path(*parts[:i], m.group(1)))
+    return str(filename)
 
 
 @dataclass(frozen=True)
@@ -60,6 +88,16 @@ def cli_errors(*also: type[Exception] | ErrorExit) -> Callable[[Callable[P, int]
                 rule = next(e for e in exits if isinstance(exc, e.kind))
                 print(f"error: {rule.prefix}{message(exc)}", file=sys.stderr)
                 return rule.code
+            except KeyboardInterrupt:  # Ctrl-C: outputs are written atomically, so nothing half-written is left
+                print("interrupted: this command's output was not written (an earlier one is kept as it was); run "
+                      "it again to redo the work", file=sys.stderr)
+                return EXIT_INTERRUPTED
+            except OSError as exc:
+                if exc.errno not in SYSTEM_FIXES:
+                    raise
+                print(f"error: {output_of(exc.filename)}: {exc.strerror}; fix: {SYSTEM_FIXES[exc.errno]}",
+                      file=sys.stderr)
+                return EXIT_USER_ERROR
 
         return run
 

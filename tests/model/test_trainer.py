@@ -51,6 +51,49 @@ def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_conf
     assert steps == [1, 2, 3, 4, 5]
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP])
+def test_ctrl_c_and_a_closed_terminal_stop_as_sigterm_does(tiny_dataset, tmp_path, tiny_config, sig):
+    """Ctrl-C (SIGINT) and a closed terminal (SIGHUP) leave a checkpoint and a resumable run, as SIGTERM does; a
+    second signal while the last checkpoint is written changes nothing."""
+    out = tmp_path / "run"
+    trainer = Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False)
+    original_step, original_save = trainer.train_step, trainer.save_checkpoint
+
+    def step_then_signal():
+        result = original_step()
+        if trainer.step == 1:
+            os.kill(os.getpid(), sig)
+        return result
+
+    def save_under_a_second_signal(*args, **kwargs):
+        os.kill(os.getpid(), sig)  # the user presses Ctrl-C again
+        return original_save(*args, **kwargs)
+
+    trainer.train_step, trainer.save_checkpoint = step_then_signal, save_under_a_second_signal
+    before = signal.getsignal(sig)
+    assert trainer.train() == {"status": "sigterm", "step": 2} and trainer.stop_signal == sig
+    assert (out / "checkpoints" / "step_000002.pt").is_file() and not (out / "model.pt").exists()
+    assert signal.getsignal(sig) == before  # the caller's handler is back
+
+
+def test_the_cli_names_the_signal_and_exits_with_its_code(monkeypatch, capsys, tmp_path):
+    from stages.model import train_cli
+
+    class Stopped:
+        stop_signal = signal.SIGINT
+
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def train(self):
+            return {"status": "sigterm", "step": 7}
+
+    monkeypatch.setattr(train_cli, "Trainer", Stopped)
+    monkeypatch.setattr(train_cli, "load_config", lambda *a, **k: None)
+    assert train_cli.main(["--data", str(tmp_path), "--out", str(tmp_path / "run")]) == 130
+    assert "stopped by SIGINT at step 7; checkpoint saved, resume with --resume" in capsys.readouterr().err
+
+
 def test_a_checkpoint_from_another_device_resumes_with_the_jitter_reseeded(tiny_dataset, tmp_path, tiny_config,
                                                                              capsys):
     """A run begun on a GPU and continued on a CPU (or back): the generator states of one device do not fit the

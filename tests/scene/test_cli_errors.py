@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from stages.scene import InputError, SceneError
@@ -73,3 +75,32 @@ def test_value_errors_can_be_reported_where_a_cli_asks_for_it(capsys):
 def test_misuse_without_parentheses_is_refused_at_import():
     with pytest.raises(TypeError, match=r"@cli_errors\(\)"):
         cli_errors(main)  # type: ignore[arg-type]
+
+
+def test_ctrl_c_ends_in_one_line_and_status_130(capsys):
+    @cli_errors()
+    def main() -> int:
+        raise KeyboardInterrupt
+
+    assert main() == 130
+    err = capsys.readouterr().err
+    assert err.startswith("interrupted: ") and "Traceback" not in err and len(err.splitlines()) == 1
+
+
+def test_a_full_disk_or_a_read_only_folder_is_said_with_the_output_it_was_for(capsys):
+    import errno
+
+    def failing(err: int, filename: str):
+        @cli_errors()
+        def main() -> int:
+            raise OSError(err, os.strerror(err), filename)
+
+        return main
+
+    assert failing(errno.ENOSPC, "out/.frames.4242.abcd1234/images/frame_00005.png")() == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: out/frames: No space left on device; fix: free disk space there")
+    assert failing(errno.EACCES, "ro/.metrics.json.77.wxyz5678.json")() == 2
+    assert capsys.readouterr().err.startswith("error: ro/metrics.json: Permission denied; fix: choose an --out in")
+    with pytest.raises(FileNotFoundError):  # any other OSError is a bug's or a crash's: its traceback stays
+        failing(errno.ENOENT, "x")()
