@@ -10,7 +10,6 @@ runs COLMAP by default, so the same dataset gives the same points (docs/poses.md
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ import pycolmap
 from stages.poses import PosesConfig, cam_from_world_from_c2w_opengl
 from stages.poses.sfm import colmap_log_level, match_features, resolve_matcher
 from stages.scene import Camera, SceneDataset, SceneError
+from stages.scene.atomic_io import scratch_folder
 
 from .assemble import place_image
 
@@ -37,7 +37,7 @@ def triangulate_dataset(ds: SceneDataset, seed: int = 0) -> o3d.geometry.PointCl
         raise SceneError(ds.root / "transforms.json", "two frames' images share a file name",
                          "give the images distinct file names, or pass --points")
     by_name = dict(zip(names, ds.frames, strict=True))
-    with tempfile.TemporaryDirectory(prefix="livescene-triangulate-") as tmp:
+    with scratch_folder("livescene-triangulate-") as tmp:
         work = Path(tmp)
         images = work / "images"
         images.mkdir()

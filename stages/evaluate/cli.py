@@ -25,6 +25,7 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", required=True, help="trained run folder (stages.model)")
     p.add_argument("--data", default=None, help="scene dataset (default: the one in the run's config.yaml)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
     p.add_argument("--truth", default=None, help="synthetic capture folder with truth/ (enables unseen combinations)")
     p.add_argument("--pose-alignment", default=None,
                    help="pose_error.json of `livescene poses compare` (needed when the run used COLMAP poses and "
@@ -112,7 +113,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                          save_renders=not args.no_renders, render_scale=scale,
                          locality_views=args.locality_views,
                          max_unseen_renders=args.max_unseen_renders or None,
-                         max_locality_pairs=args.max_locality_pairs or None)
+                         max_locality_pairs=args.max_locality_pairs or None, progress=not args.no_progress)
     run = open_run(args.run, args.device)
     extra = {"run": str(args.run), "device": args.device,
              "encoder": getattr(grounder.encoder, "name", None) if grounder else None}

@@ -69,6 +69,8 @@ class EvaluateConfig:
     """Relevancy above which a pixel belongs to the queried object."""
     save_renders: bool = True
     """Write PNGs (held-out renders, unseen model|truth pairs, grounding maps) for the report."""
+    progress: bool = True
+    """Progress bars on stderr (off for logs: ``--no-progress``)."""
     locality_views: int = 8
     """Held-out poses of the locality test (each object at 0 and 1, truth swept region; needs truth). Two views
     were the default until 24 Nov: on the kitchen they put a run under the 1/255 line that 8 views put over it."""
@@ -191,7 +193,7 @@ class Evaluator:
         # a run trained on measured exposure gains renders the nominal exposure: score it against each held-out
         # image at that exposure too (its gains come from the same measurement; docs/model.md, "Exposure")
         gains = getattr(self.run, "exposure_gains", None) or {}
-        for frame in tqdm(frames, desc="held-out views", unit="view"):
+        for frame in tqdm(frames, desc="held-out views", unit="view", disable=not self.config.progress):
             gt = self._image(frame)
             t0 = time.perf_counter()
             out = self._render(frame, None if learned else frame.state)
@@ -274,7 +276,7 @@ class Evaluator:
         saved = model_renders = 0
         render_seconds = 0.0
         pose_sources = set()
-        for frame in tqdm(views, desc="unseen combinations", unit="view"):
+        for frame in tqdm(views, desc="unseen combinations", unit="view", disable=not self.config.progress):
             cam = self._camera(frame)
             tcam = self.truth.camera_for(cam.width, cam.height)
             t_c2w, how = self.truth.pose_for(frame)
@@ -384,7 +386,7 @@ class Evaluator:
                            | {source: {"per_view": [], "frames": []} for source in sources})
         # views outside, queries inside: a view's embedding is normalised (and decoded) once for all its queries
         for (frame, out), masks in tqdm(list(zip(rendered, truth_masks, strict=True)), desc="grounding views",
-                                        unit="view"):
+                                        unit="view", disable=not self.config.progress):
             unit = self.grounder.unit_language(out["language"]) if "language" in sources else None
             decoded = self.grounder.probs_from_unit_language(unit) if unit is not None else None
             for q, entry in zip(queries, entries, strict=True):
@@ -459,7 +461,7 @@ class Evaluator:
             renders += 1
             return self._render(frame, states, rgb_only=True)["rgb"]
 
-        out = locality(render, self.truth, frames, self._camera, self.ds.objects)
+        out = locality(render, self.truth, frames, self._camera, self.ds.objects, progress=self.config.progress)
         self.timings["locality"] = {"model_renders": renders}
         return out | {"views": len(frames), "views_asked": cfg.locality_views, "max_pairs": cfg.max_locality_pairs,
                       "views_cut": _cut(n_views, cfg.locality_views, len(self.ds.frames_in("test")))}

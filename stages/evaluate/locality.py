@@ -66,10 +66,10 @@ def swept_region(truth_render: Callable[[dict[str, float]], dict[str, Any]], obj
 
 
 def locality(render: RenderFn, truth: Any, frames: Sequence[Frame], camera_of: Callable[[Frame], Camera],
-             objects: Sequence[str]) -> dict[str, Any]:
+             objects: Sequence[str], progress: bool = True) -> dict[str, Any]:
     """Per object: the model's and the truth's mean change outside / inside the swept region, x255."""
     records = []
-    for frame in tqdm(frames, desc="locality views", unit="view"):  # 2-4 renders per object each
+    for frame in tqdm(frames, desc="locality views", unit="view", disable=not progress):  # 2-4 renders per object
         camera = camera_of(frame)
         own = {o: float(v) for o, v in (truth.state_for(frame) or frame.state or {}).items()}
         base = {o: own.get(o, 0.0) for o in objects}

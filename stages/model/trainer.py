@@ -35,6 +35,7 @@ import torch
 from tqdm import tqdm
 
 from stages.scene import InputError, SceneDataset, SceneError, atomic_path, read_scene, write_json, write_yaml
+from stages.scene.atomic_io import remove_dead_temporaries
 from stages.scene.exposure import read_exposure
 from stages.scene.machine import machine_info
 
@@ -595,6 +596,7 @@ class Trainer:
     def train(self) -> dict[str, Any]:
         cfg = self.config
         self.out.mkdir(parents=True, exist_ok=True)
+        remove_dead_temporaries(self.out / "checkpoints")  # a checkpoint a killed run was half way through saving
         if self.resume:
             ckpt = self.latest_checkpoint()
             if ckpt is not None:
@@ -635,6 +637,8 @@ class Trainer:
             for row in self.log_rows[len(self.log_rows) - sum(r is not None for r in results):]:
                 row["rays_per_s"] = round(rays_per_s, 1)
             done = [r for r in results if r is not None]
+            if not results:  # nothing ran since the last read (the loop's final read): the bar keeps its figures
+                return
             post = {"loss": f"{done[-1]['loss']:.4f}" if done else "skipped", "rays/s": f"{rays_per_s:.0f}"}
             if last_psnr is not None:
                 post["psnr"] = f"{last_psnr:.2f}"

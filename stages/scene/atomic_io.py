@@ -95,6 +95,40 @@ def _remove_orphans(path: Path, suffix: str | None = None) -> None:
             Path(entry.path).unlink(missing_ok=True)
 
 
+_ANY_TEMPORARY = re.compile(r"^\..+\.(\d+)\.(?:old\.)?[a-z0-9_]{8}(?:\.[^.]+)?$")
+
+
+def remove_dead_temporaries(folder: Path) -> None:
+    """Delete every temporary of ``atomic_path`` / ``atomic_dir`` in ``folder`` whose writer is gone, whatever
+    output it was for: a checkpoint a killed run was saving at a step that is never saved again would otherwise
+    stay (its own name is never written again, so ``_remove_orphans`` never meets it)."""
+    if not folder.is_dir():
+        return
+    with os.scandir(folder) as entries:
+        dead = [e for e in entries if (m := _ANY_TEMPORARY.match(e.name)) and int(m.group(1)) != os.getpid()
+                and not _alive(int(m.group(1))) and not e.is_symlink()]
+    for entry in dead:
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            Path(entry.path).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def scratch_folder(prefix: str) -> Iterator[Path]:
+    """A temporary working folder in the system's temporary directory (``<prefix><pid>.<random>``), removed on exit;
+    those a killed run of the same kind left (its process gone) are removed first, as no exit handler ran for them."""
+    root = Path(tempfile.gettempdir())
+    pattern = re.compile(rf"^{re.escape(prefix)}(\d+)\.")
+    for entry in root.glob(f"{prefix}*"):
+        m = pattern.match(entry.name)
+        if m and entry.is_dir() and not entry.is_symlink() and int(m.group(1)) != os.getpid() \
+                and not _alive(int(m.group(1))):
+            shutil.rmtree(entry, ignore_errors=True)
+    with tempfile.TemporaryDirectory(prefix=f"{prefix}{os.getpid()}.") as tmp:
+        yield Path(tmp)
+
+
 def _marker_stage(folder: Path) -> str | None:
     marker = folder / STAGE_MARKER
     try:

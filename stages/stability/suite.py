@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,8 @@ from typing import Any
 from unittest import mock
 
 import pytest
+
+from stages.scene.atomic_io import scratch_folder
 
 from .collector import GROUPS, SUMMARY_FORMAT, CaseResult, SummaryCollector
 
@@ -77,7 +78,7 @@ def run_suite(cases: list[str] | None = None, groups: list[str] | None = None, *
     collector = SummaryCollector(cases, groups, quick=quick, threads=threads, on_result=on_result)
     with contextlib.ExitStack() as stack:
         if workdir is None and not collect_only:  # scratch files go with the run, as pytest's own would not
-            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="livescene-stability-")))
+            workdir = stack.enter_context(scratch_folder("livescene-stability-"))
         args = pytest_args(quick=quick, threads=threads, workdir=workdir, workflow=workflow, captures=captures,
                            paths=paths, collect_only=collect_only, extra=extra)
         # stdout carries the table: pytest's progress and tracebacks go to stderr (the workflow's log)

@@ -142,3 +142,42 @@ def test_a_killed_runs_temporary_file_is_removed_by_the_next_write(tmp_path):
     assert not orphan.exists() and live.is_file() and other.is_file() and folder.is_dir()
     assert json.loads((tmp_path / "metrics.json").read_text()) == {"psnr": 1.0}
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, folder.name, "metrics.json"])
+
+
+def test_dead_writers_temporaries_of_any_name_are_removed(tmp_path):
+    import subprocess
+    import sys
+
+    from stages.scene.atomic_io import remove_dead_temporaries
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(gone.stdout)
+    half = tmp_path / f".step_000155.pt.{dead}.abcd1234.pt"  # a checkpoint a killed run was saving
+    half.write_bytes(b"PK")
+    live = tmp_path / f".step_000200.pt.{os.getppid()}.wxyz5678.pt"  # another writer, still running
+    live.write_bytes(b"PK")
+    kept = [tmp_path / "step_000100.pt", tmp_path / ".hidden", tmp_path / ".notes.txt"]
+    for path in kept:
+        path.write_bytes(b"x")
+    remove_dead_temporaries(tmp_path)
+    remove_dead_temporaries(tmp_path / "absent")  # no folder: nothing to do
+    assert not half.exists() and live.exists() and all(p.exists() for p in kept)
+
+
+def test_a_killed_runs_scratch_folder_is_removed_by_the_next_one(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+    import tempfile
+
+    from stages.scene.atomic_io import scratch_folder
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    left = tmp_path / f"livescene-triangulate-{int(gone.stdout)}.abcd1234"  # SIGKILL: no exit handler ran
+    (left / "images").mkdir(parents=True)
+    other = tmp_path / f"livescene-triangulate-{os.getppid()}.wxyz5678"  # a live run's
+    other.mkdir()
+    with scratch_folder("livescene-triangulate-") as work:
+        assert work.is_dir() and work.name.startswith(f"livescene-triangulate-{os.getpid()}.")
+        assert not left.exists() and other.is_dir()
+    assert not work.exists()

@@ -38,4 +38,5 @@ rule evaluate:
     shell:
         "{params.cli} evaluate --run {params.run:q} --data {input.data:q} {params.args} --out {output:q}"
         " --max-views {params.views} --unseen-views {params.unseen} --max-unseen-renders {params.max_unseen}"
-        " --max-locality-pairs {params.max_pairs} --max-side {params.max_side} --device {params.device} > {log:q} 2>&1"
+        " --max-locality-pairs {params.max_pairs} --max-side {params.max_side} --device {params.device}"
+        " --no-progress > {log:q} 2>&1"
