@@ -618,6 +618,12 @@ class Trainer:
                 signal.signal(sig, handler)
 
     def _train(self, cfg: RunConfig) -> dict[str, Any]:
+        if self.step < cfg.train.max_steps:
+            # a finished run resumed for more steps is unfinished until they are done: run.json (the completion
+            # mark, first) and model.pt go, or an interruption would leave the old weights looking final; the
+            # checkpoint of the old last step stays
+            for name in ("run.json", "model.pt"):
+                (self.out / name).unlink(missing_ok=True)
         if self.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(self.device)
         t0 = self._t0 = time.perf_counter()

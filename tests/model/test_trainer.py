@@ -265,3 +265,26 @@ def test_objects_without_any_mask_are_refused_for_livescene(tiny_dataset, tmp_pa
     with pytest.raises(SceneError, match=r"names objects .* but no training frame has a mask.*fix: ingest masks"):
         Trainer(tiny_config(root, steps=2), tmp_path / "run", device="cpu", progress=False)
     Trainer(tiny_config(root, "method=mk-planes", steps=2), tmp_path / "mk", device="cpu", progress=False)
+
+
+def test_a_finished_run_resumed_for_more_steps_is_unfinished_until_they_are_done(tiny_dataset, tmp_path,
+                                                                                   tiny_config):
+    out = tmp_path / "run"
+    Trainer(tiny_config(tiny_dataset.root, steps=3), out, device="cpu", progress=False).train()
+    assert (out / "run.json").is_file() and (out / "model.pt").is_file()
+    trainer = Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True)
+    original = trainer.train_step
+
+    def step_then_signal():
+        result = original()
+        if trainer.step == 3:  # the first of the two new steps: a SIGTERM arrives
+            os.kill(os.getpid(), signal.SIGTERM)
+        return result
+
+    trainer.train_step = step_then_signal
+    assert trainer.train() == {"status": "sigterm", "step": 4}
+    # the 3-step run.json and model.pt no longer pose as the run's result; the interrupted step is checkpointed
+    assert not (out / "run.json").exists() and not (out / "model.pt").exists()
+    assert (out / "checkpoints" / "step_000004.pt").is_file()
+    Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True).train()
+    assert json.loads((out / "run.json").read_text())["steps"] == 5
