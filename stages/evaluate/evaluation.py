@@ -489,7 +489,8 @@ class Evaluator:
             "evaluate_version": EVALUATE_VERSION,
             "dataset": str(self.ds.root),
             "objects": self.ds.objects,
-            "config": asdict(self.config),
+            # what the numbers depend on: the progress bars do not (metrics.json is the same with --no-progress)
+            "config": {k: v for k, v in asdict(self.config).items() if k != "progress"},
             "held_out": held,
             "unseen_combinations": unseen,
             "grounding": grounding,
