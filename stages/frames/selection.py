@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from stages.scene import frame_number_of
 
@@ -78,35 +79,31 @@ def indices_named_in(annotations: Path) -> frozenset[int]:
     its ``masks/`` subfolder or of one folder per object, or the images of a COCO file; hidden files left out."""
     annotations = Path(annotations)
     if annotations.is_file():
-        return _coco_image_numbers(annotations)
+        return _image_numbers(_read_json(annotations))
     folders = [annotations, annotations / "masks", *(d for d in annotations.iterdir()
                                                       if d.is_dir() and not d.name.startswith("."))]
     numbers = set()
     for folder in (f for f in folders if f.is_dir()):
         files = [p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")]
         jsons = [p for p in files if p.suffix.lower() == ".json"]
-        if folder == annotations and len(jsons) == 1 and _is_coco(jsons[0]):  # a COCO file in its folder
-            numbers |= _coco_image_numbers(jsons[0])
+        data = _read_json(jsons[0]) if folder == annotations and len(jsons) == 1 else None
+        if isinstance(data, dict) and isinstance(data.get("images"), list):  # a COCO file in its folder
+            numbers |= _image_numbers(data)
             files.remove(jsons[0])
         numbers |= {n for n in (frame_number_of(p.stem) for p in files) if n is not None}
     return frozenset(numbers)
 
 
-def _is_coco(path: Path) -> bool:
+def _read_json(path: Path) -> Any:
+    """The content of a JSON file, or None when unreadable (the labels stage then names the problem)."""
     try:
-        data = json.loads(path.read_text(encoding="utf-8-sig"))
+        return json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return False
-    return isinstance(data, dict) and isinstance(data.get("images"), list)
+        return None
 
 
-def _coco_image_numbers(path: Path) -> frozenset[int]:
-    """Frame numbers of the images a COCO file annotates (a LabelMe file: of its image); none when unreadable (the
-    labels stage then names the problem)."""
-    try:
-        data = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return frozenset()
+def _image_numbers(data: Any) -> frozenset[int]:
+    """Frame numbers of the images a COCO file's content annotates (a LabelMe file's: of its image)."""
     if not isinstance(data, dict):
         return frozenset()
     names = [img.get("file_name") for img in data.get("images", []) if isinstance(img, dict)]

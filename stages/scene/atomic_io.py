@@ -74,6 +74,22 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _remove_dead(folder: Path, pattern: re.Pattern[str], kind: str = "any") -> None:
+    """Delete the entries of ``folder`` (``kind``: "dir", "file" or "any"; never a link) whose name ``pattern``
+    matches with a writer's pid as its group 1, when that process is gone: no exit handler ran for them."""
+    if not folder.is_dir():
+        return
+    with os.scandir(folder) as entries:
+        dead = [e for e in entries if (m := pattern.match(e.name)) and int(m.group(1)) != os.getpid()
+                and not e.is_symlink() and (kind != "dir" or e.is_dir(follow_symlinks=False))
+                and (kind != "file" or e.is_file(follow_symlinks=False)) and not _alive(int(m.group(1)))]
+    for entry in dead:
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            Path(entry.path).unlink(missing_ok=True)
+
+
 def _remove_orphans(path: Path, suffix: str | None = None) -> None:
     """Delete the temporary siblings of ``path`` that a killed run left (their writer's process is gone).
 
@@ -82,17 +98,8 @@ def _remove_orphans(path: Path, suffix: str | None = None) -> None:
     output, which Snakemake never starts twice, keeps its own. ``suffix`` None: folders, else files.
     """
     tail = r"(?:old\.)?[a-z0-9_]{8}" if suffix is None else r"[a-z0-9_]{8}" + re.escape(suffix)
-    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.{tail}$")
-    prefix = f".{path.name}."
-    with os.scandir(path.parent) as entries:
-        orphans = [e for e in entries if e.name.startswith(prefix) and (m := pattern.match(e.name))
-                   and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1)))
-                   and (e.is_dir(follow_symlinks=False) if suffix is None else e.is_file(follow_symlinks=False))]
-    for entry in orphans:
-        if suffix is None:
-            shutil.rmtree(entry.path, ignore_errors=True)
-        else:
-            Path(entry.path).unlink(missing_ok=True)
+    _remove_dead(path.parent, re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.{tail}$"),
+                 "dir" if suffix is None else "file")
 
 
 _ANY_TEMPORARY = re.compile(r"^\..+\.(\d+)\.(?:old\.)?[a-z0-9_]{8}(?:\.[^.]+)?$")
@@ -102,29 +109,14 @@ def remove_dead_temporaries(folder: Path) -> None:
     """Delete every temporary of ``atomic_path`` / ``atomic_dir`` in ``folder`` whose writer is gone, whatever
     output it was for: a checkpoint a killed run was saving at a step that is never saved again would otherwise
     stay (its own name is never written again, so ``_remove_orphans`` never meets it)."""
-    if not folder.is_dir():
-        return
-    with os.scandir(folder) as entries:
-        dead = [e for e in entries if (m := _ANY_TEMPORARY.match(e.name)) and int(m.group(1)) != os.getpid()
-                and not _alive(int(m.group(1))) and not e.is_symlink()]
-    for entry in dead:
-        if entry.is_dir(follow_symlinks=False):
-            shutil.rmtree(entry.path, ignore_errors=True)
-        else:
-            Path(entry.path).unlink(missing_ok=True)
+    _remove_dead(folder, _ANY_TEMPORARY)
 
 
 @contextlib.contextmanager
 def scratch_folder(prefix: str) -> Iterator[Path]:
     """A temporary working folder in the system's temporary directory (``<prefix><pid>.<random>``), removed on exit;
     those a killed run of the same kind left (its process gone) are removed first, as no exit handler ran for them."""
-    root = Path(tempfile.gettempdir())
-    pattern = re.compile(rf"^{re.escape(prefix)}(\d+)\.")
-    for entry in root.glob(f"{prefix}*"):
-        m = pattern.match(entry.name)
-        if m and entry.is_dir() and not entry.is_symlink() and int(m.group(1)) != os.getpid() \
-                and not _alive(int(m.group(1))):
-            shutil.rmtree(entry, ignore_errors=True)
+    _remove_dead(Path(tempfile.gettempdir()), re.compile(rf"^{re.escape(prefix)}(\d+)\."), "dir")
     with tempfile.TemporaryDirectory(prefix=f"{prefix}{os.getpid()}.") as tmp:
         yield Path(tmp)
 

@@ -160,6 +160,7 @@ def _item_problems(record, kind, poses):
         problems.append(f"column 'names': 'no', but the id maps of {masks!r} number their objects and no "
                         "mapping.yaml beside them names the numbers; fix: give the mapping.yaml ({id: name}) in "
                         "column 'names' (the names also turn on the language rules)")
+    known = _mapping_names(names)  # read once for every item
     for item in (i.strip() for i in record.get("state_ranges", "").split(";") if i.strip()):
         name, _, bounds = item.partition("=")
         try:
@@ -170,7 +171,6 @@ def _item_problems(record, kind, poses):
         if not lo < hi:
             problems.append(f"column 'state_ranges': {item!r} has LO {lo:g} not below HI {hi:g}; fix: write the "
                             "closed value first, e.g. fridge=0,110")
-        known = _mapping_names(names)
         if known is not None and name.strip() != "*" and name.strip() not in known:
             problems.append(f"column 'state_ranges': {name.strip()!r} is no object of {names!r} ({sorted(known)}); "
                             "fix: use the names of the mapping.yaml, or * for every object")
