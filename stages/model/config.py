@@ -132,8 +132,10 @@ class SamplingConfig:
 class StateConfig:
     """Given or learned object states (docs/method.md section 6)."""
 
-    mode: Literal["given", "learned"] = "given"
-    """'given' (dense states from the dataset) or 'learned' (key frames supervise a state network)."""
+    mode: Literal["auto", "given", "learned"] = "auto"
+    """'given' (dense states from the dataset), 'learned' (key frames supervise a state network) or 'auto': given
+    when every frame carries every object's state, else learned when the dataset has key frames (a published
+    dataset); a run records the mode it resolved to."""
     grid_resolution: int = 256
     """Cells of the 1D grid over normalised frame index (257 vertices, as the reference)."""
     grid_channels: int = 4

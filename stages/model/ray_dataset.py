@@ -16,6 +16,7 @@ import torch
 
 from stages.scene import Frame, SceneDataset, SceneError
 from stages.scene.camera import pixel_directions
+from stages.scene.key_frame_states import frame_times
 from stages.scene.masks import unreliable_masks
 
 from .rays import RayBundle
@@ -33,11 +34,6 @@ class RayBatch:
     """[R] long: object index 0..alpha-1, alpha = background, -1 = no reliable mask."""
     frames: torch.Tensor
     """[R] long: index of the frame in the dataset's frame list."""
-
-
-def frame_times(n_frames: int) -> np.ndarray:
-    """Normalised frame index t in [0, 1] of every dataset frame (frame order of transforms.json)."""
-    return np.linspace(0.0, 1.0, n_frames) if n_frames > 1 else np.zeros(1)
 
 
 def state_vector(ds: SceneDataset, frame: Frame) -> np.ndarray:
@@ -105,7 +101,7 @@ class RayDataset:
         self.width, self.height = next(iter(cams))
         index_of = {id(f): i for i, f in enumerate(ds.frames)}
         self.frame_index = torch.tensor([index_of[id(f)] for f in frames], dtype=torch.long)
-        times = frame_times(len(ds.frames))
+        times = frame_times(ds.frames)
         self.times = torch.tensor(times[self.frame_index.numpy()], dtype=torch.float32)
         states = np.stack([state_vector(ds, f) for f in frames]) if ds.n_objects else np.zeros((len(frames), 0))
         if need_states and np.isnan(states).any():

@@ -96,7 +96,7 @@ class LoadedRun:
         if not 0 <= frame_index < n:
             raise InputError(self.run_dir, f"frame index {frame_index} outside the trained dataset's 0..{n - 1}",
                              "pass the index of a frame of the dataset the run was trained on")
-        return frame_index / (n - 1) if n > 1 else 0.0
+        return self.info.frame_time(frame_index)
 
     @torch.no_grad()
     def learned_states(self, frame_indices: Sequence[int] | None = None) -> np.ndarray:

@@ -19,7 +19,9 @@ def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
     p.add_argument("--method", default="livescene", help="registered method name (default livescene)")
     p.add_argument("--preset", default="cpu-demo", help="config/model/<name>.yaml or a YAML path (default cpu-demo)")
     p.add_argument("--out", required=True, help="run folder to write")
-    p.add_argument("--state-mode", choices=["given", "learned"], help="given (dataset states) or learned")
+    p.add_argument("--state-mode", choices=["auto", "given", "learned"],
+                   help="given (every frame's states), learned (key frames supervise a state network) or auto "
+                        "(default: given when every frame carries states, else learned)")
     p.add_argument("--language-targets", help="targets .npz from `livescene language targets`: enables the table")
     p.add_argument("--exposure", help="the dataset's exposure estimate from `livescene scene exposure --out` (for "
                    "model.appearance.mode auto / measured): read instead of measured again")

@@ -37,6 +37,7 @@ from tqdm import tqdm
 from stages.scene import InputError, SceneDataset, SceneError, atomic_path, read_scene, write_json, write_yaml
 from stages.scene.atomic_io import remove_dead_temporaries
 from stages.scene.exposure import read_exposure
+from stages.scene.key_frame_states import frame_times, key_frame_states
 from stages.scene.machine import machine_info
 
 from .allocator import keep_freed_memory
@@ -44,7 +45,7 @@ from .appearance_choice import EXPOSURE_FILE, resolve_appearance
 from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
-from .ray_dataset import RayBatch, RayDataset, frame_times, state_vector
+from .ray_dataset import RayBatch, RayDataset, state_vector
 from .run_inputs import config_differences, data_digest
 from .scene_normalization import SceneNormalization
 from .step_graphs import GraphCaptureError, StepGraphs
@@ -130,8 +131,8 @@ def seed_everything(seed: int) -> None:
 
 
 def scene_info(ds: SceneDataset, config: RunConfig, language: LanguageTargets | None) -> SceneInfo:
-    """Objects, frame count, key frames (as normalised times) and language size of a dataset."""
-    times = frame_times(len(ds.frames))
+    """Objects, frame count and times, key frames (as times and states in [0, 1]) and language size of a dataset."""
+    times = frame_times(ds.frames)
     key_t: list[float] = []
     key_s: list[list[float]] = []
     every = config.model.state.key_frame_every
@@ -141,16 +142,16 @@ def scene_info(ds: SceneDataset, config: RunConfig, language: LanguageTargets | 
                 key_t.append(float(times[i]))
                 key_s.append(state_vector(ds, f).astype(float).tolist())
     else:
-        index = {f.frame_id: i for i, f in enumerate(ds.frames)}
-        for fid, values in sorted(ds.key_frames.items()):
-            if fid in index:
-                key_t.append(float(times[index[fid]]))
-                key_s.append([float(values.get(o, math.nan)) for o in ds.objects])
+        for i, values in sorted(key_frame_states(ds).by_frame.items(), key=lambda kv: ds.frames[kv[0]].frame_id):
+            key_t.append(float(times[i]))
+            key_s.append([float(values.get(o, math.nan)) for o in ds.objects])
     train = set(map(id, ds.frames_in("train")))
+    even = len(ds.frames) < 2 or bool(np.array_equal(times, np.linspace(0.0, 1.0, len(ds.frames))))
     return SceneInfo(objects=list(ds.objects), n_frames=len(ds.frames), key_times=key_t, key_states=key_s,
                      language_dim=language.dim if language else 0,
                      language_levels=int(language.levels.numel()) if language else 0,
-                     train_frames=[i for i, f in enumerate(ds.frames) if id(f) in train])
+                     train_frames=[i for i, f in enumerate(ds.frames) if id(f) in train],
+                     frame_times=None if even else [float(t) for t in times])
 
 
 def lr_factor(step: int, warmup: int, total: int, final_ratio: float, time_fraction: float = 0.0) -> float:
@@ -207,6 +208,19 @@ class Trainer:
         self._setup()
 
     # -- setup ----------------------------------------------------------------------------------------------
+    def _auto_state_mode(self) -> str:
+        """``given`` when every frame carries every object's state (a dataset of this project's states stage);
+        ``learned`` when only key frames give states, as in the published datasets, which the reference trains
+        from their key frames alone; else ``given``, whose error names the missing states."""
+        ds = self.ds
+        if not ds.objects or all(f.state and set(ds.objects) <= set(f.state) for f in ds.frames):
+            return "given"
+        if ds.key_frames:
+            print(f"{ds.root}: states only at key frames ({ds.root / 'key_frame_value.yaml'}): state mode learned",
+                  file=sys.stderr)
+            return "learned"
+        return "given"
+
     def _setup(self) -> None:
         cfg = self.config
         if cfg.train.threads > 0:
@@ -224,8 +238,12 @@ class Trainer:
         if "requested" in self.appearance:
             print(f"appearance auto: {self.appearance['reason']}: {self.appearance['mode']}", file=sys.stderr)
         mode = cfg.model.state.mode
-        if mode not in ("given", "learned"):
-            raise InputError("--state-mode", f"unknown state mode {mode!r}", "use given or learned")
+        if mode not in ("auto", "given", "learned"):
+            raise InputError("--state-mode", f"unknown state mode {mode!r}", "use auto, given or learned")
+        if self.ds.split_note:
+            print(f"{self.ds.root}: transforms.json names no split: {self.ds.split_note}", file=sys.stderr)
+        if mode == "auto":  # the resolved mode is what the run's config records
+            mode = cfg.model.state.mode = self._auto_state_mode()
         if mode == "learned" and not self.ds.objects:
             # a room filmed without masks or key frames has no object whose state could be learned: it trains as
             # a static field (the resolved mode is what the run's config records, as with appearance auto)
@@ -252,6 +270,11 @@ class Trainer:
                                      log_gains=self.log_gains)
         self.eval_rays = RayDataset(self.ds, test_frames, self.norm, near, self.device, need_states=given)
         self.info = scene_info(self.ds, cfg, self.language)
+        self.key_frame_ranges = key_frame_states(self.ds).rescaled if mode == "learned" else {}
+        kpath = self.ds.root / "key_frame_value.yaml"
+        for name, r in self.key_frame_ranges.items():
+            print(f"{kpath}: {name!r} key values {r['lo']:g}..{r['hi']:g} mapped to [0, 1] ({r['source']})",
+                  file=sys.stderr)
         self.data_digest = data_digest(self._data_tensors())
         if mode == "learned" and not self.info.key_times:
             raise InputError(self.ds.root / "key_frame_value.yaml", "learned-state mode needs key frames, found none",
@@ -709,7 +732,7 @@ class Trainer:
             "format": MODEL_FORMAT,
             "method": cfg.method,
             "config": cfg.to_dict(),
-            "info": dataclasses.asdict(self.info),
+            "info": self.info.to_dict(),
             "state_dict": self.model.state_dict(),
             "normalization": self.norm.to_dict(),
             "frame_states": frame_states,
@@ -751,5 +774,9 @@ class Trainer:
             "seed": cfg.seed,
             "rays_per_step": cfg.train.batch_rays,
         }
+        if self.key_frame_ranges:  # key values in a unit of the annotator's, mapped to [0, 1]
+            run["key_frame_ranges"] = self.key_frame_ranges
+        if self.ds.split_note:
+            run["split"] = self.ds.split_note
         write_json(self.out / "run.json", run)
         return run

@@ -16,6 +16,7 @@ from .atomic_io import write_json
 from .cli_errors import cli_errors
 from .dataset import read_scene
 from .exposure import estimate_exposure
+from .key_frame_states import key_frame_states
 
 
 def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
@@ -43,6 +44,12 @@ def main(argv: list[str] | None = None) -> int:
     ds = read_scene(args.path, validate=True, deep=getattr(args, "deep", False))
     if args.command == "validate":
         print(f"{args.path}: valid scene dataset, {len(ds.frames)} frames, objects {ds.objects}")
+        if ds.split_note:
+            print(f"note: transforms.json names no split: {ds.split_note}; {len(ds.frames_in('test'))} of "
+                  f"{len(ds.frames)} frames held out")
+        for name, r in key_frame_states(ds).rescaled.items():
+            print(f"note: {ds.root / 'key_frame_value.yaml'}: {name!r} key values {r['lo']:g}..{r['hi']:g} are "
+                  f"mapped to [0, 1] ({r['source']}; a fixed range goes in scene.json \"state_ranges\")")
         if ds.objects and not ds.has_masks:  # valid, but not for every method: say which
             print(f"warning: {ds.root / 'mapping.yaml'}: names objects {ds.objects} but the dataset has no masks/: "
                   "LiveScene and CoNeRF-style refuse it (only masks train their probability field) and no grounding "

@@ -30,8 +30,9 @@ import numpy as np
 from .atomic_io import write_json, write_yaml
 from .camera import Camera
 from .errors import SceneError
-from .keyframes import frame_id_of, read_key_frames, write_key_frames
+from .keyframes import frame_id_of, frame_number_of, read_key_frames, write_key_frames
 from .masks import mask_path, read_mask
+from .splits import reference_split
 from .transforms import (
     camera_from_dict,
     camera_to_dict,
@@ -105,6 +106,8 @@ class SceneDataset:
     """Top-level transforms.json keys of nerfstudio as read: ``NERFSTUDIO_KEYS`` are written back (an
     absent ``applied_transform`` as the identity: the poses' world is the data's own); the split
     lists are only checked, ``write_scene`` writes them anew from the frames' splits."""
+    split_note: str | None = None
+    """How the split was derived when transforms.json names none (``reference_split``); None when it names one."""
 
     def __post_init__(self) -> None:
         if not self.object_ids:
@@ -291,6 +294,12 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
                             source_index=None if src is None else int(src)))
     camera = shared or frames[0].camera  # type: ignore[assignment]
     _apply_split_lists(data, frames, tpath)
+    split_note = None
+    if all(f.split is None for f in frames):  # a published dataset names no split: the reference derives one
+        blender = "camera_angle_x" in data and "fl_x" not in data
+        splits, split_note = reference_split([f.file_path for f in frames], blender)
+        for f, split in zip(frames, splits, strict=True):
+            f.split = split
     nerfstudio = {k: data[k] for k in (*NERFSTUDIO_KEYS, *SPLIT_KEYS) if k in data}
     if "applied_transform" in nerfstudio:
         m = np.asarray(nerfstudio["applied_transform"], dtype=np.float64)
@@ -322,7 +331,8 @@ def read_scene(root: str | Path, *, validate: bool = True, deep: bool = False) -
 
     key_frames = read_key_frames(root / "key_frame_value.yaml", objects or None)
     ds = SceneDataset(root=root, camera=camera, frames=frames, objects=objects, object_ids=object_ids,
-                      key_frames=key_frames, scene_box=scene_box, prompts=prompts, meta=meta, nerfstudio=nerfstudio)
+                      key_frames=key_frames, scene_box=scene_box, prompts=prompts, meta=meta, nerfstudio=nerfstudio,
+                      split_note=split_note)
     if validate:
         validate_scene(ds, deep=deep)
     return ds
@@ -433,12 +443,31 @@ def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
             from .masks import check_mask_array
 
             check_mask_array(arr, path, cam.height, cam.width, ds.n_objects)
-    known = set(seen)
+    _check_key_frames(ds)
+
+
+def _check_key_frames(ds: SceneDataset) -> None:
+    """Every key frame names a frame (by id or number, ``match_key_frames``). One whose image exists but has no
+    entry in transforms.json (a frame COLMAP did not register, or one dropped after annotation) is left out with
+    a warning, as the reference leaves it out; one that names no image at all is a typo, refused. Key values are
+    normalised here once, so that a range that cannot be applied is named by validation, not by a training."""
+    from .key_frame_states import key_frame_states, match_key_frames
+
     kpath = ds.root / "key_frame_value.yaml"
-    for fid in ds.key_frames:
-        if fid not in known:
-            raise SceneError(kpath, f"key frame {fid!r} matches no frame in transforms.json",
-                             "key frames must use the frame id of an image (last '_' token of its name)")
+    _, unmatched = match_key_frames(ds.key_frames, ds.frames)
+    if unmatched:
+        images = ds.root / "images"
+        numbers = {frame_number_of(p.stem) for p in images.iterdir()} if images.is_dir() else set()
+        unposed = [fid for fid in unmatched if frame_number_of(fid) in numbers - {None}]
+        missing = [fid for fid in unmatched if fid not in unposed]
+        if missing:
+            raise SceneError(kpath, f"key frame {missing[0]!r} matches no frame of transforms.json nor any image "
+                             f"of {images}", "key frames must name an image by its frame id (the last '_' token "
+                             "of its name) or its number")
+        warnings.warn(f"{kpath}: key frame(s) {unposed[:5]} name images that transforms.json has no pose for; they "
+                      "are not used; fix: pose those frames, or drop them from the file to silence this",
+                      stacklevel=3)
+    key_frame_states(ds)
 
 
 def _camera_keys(ds: SceneDataset) -> tuple[dict[str, Any], list[dict[str, Any]]]:

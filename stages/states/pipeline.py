@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from stages.scene import atomic_dir, read_yaml_mapping, write_json, write_yaml
+from stages.scene.key_frame_states import key_value_range
 
 from .annotations import AnnotationFormat, Annotations, KeyValue, read_annotations
 from .errors import StateError
@@ -106,15 +107,12 @@ def object_range(config: StatesConfig, ann: Annotations, name: str, kvs: list[Ke
             raise StateError(ann.path, f"row {kv.row}: value {kv.value} of {name!r} lies outside the range "
                              f"[{lo}, {hi}] ({source})", "fix the value or widen the range")
         return {"lo": float(lo), "hi": float(hi), "source": source}
-    lo, hi = float(values.min()), float(values.max())
-    if lo >= 0.0 and hi <= 1.0:
-        # already the [0, 1] states LiveScene trains on: min-max would stretch whatever span the key frames cover to
-        # the whole range, so an object that stays shut, annotated with a little noise, would read as fully open
-        return {"lo": 0.0, "hi": 1.0, "source": "key values within [0, 1]: kept as given"}
-    if hi > lo:
-        return {"lo": lo, "hi": hi, "source": "min-max of key frames"}
-    raise StateError(ann.path, f"row {kvs[0].row}: {name!r} has the single value {lo} on every key frame, "
-                     "which min-max normalisation cannot map to [0, 1]", f"pass --range {name}=LO,HI")
+    found = key_value_range(values.tolist())
+    if found is None:
+        raise StateError(ann.path, f"row {kvs[0].row}: {name!r} has the single value {values[0]} on every key "
+                         "frame, which min-max normalisation cannot map to [0, 1]", f"pass --range {name}=LO,HI")
+    lo, hi, source = found
+    return {"lo": lo, "hi": hi, "source": source}
 
 
 def compute_states(config: StatesConfig) -> dict:

@@ -67,7 +67,7 @@ def test_values_are_typed_exactly():
     assert cfg.train.compile is True and cfg.data == str(Path("some/dataset")) and cfg.seed == 3
     assert "expected an integer" in refusal(["train.max_steps=1000.0"]).problem
     assert "expected true or false" in refusal(["train.compile=1"]).problem
-    assert "expected one of 'given', 'learned'" in refusal(["model.state.mode=lerned"]).problem
+    assert "expected one of 'auto', 'given', 'learned'" in refusal(["model.state.mode=lerned"]).problem
     assert "expected one of 'default', 'reduce-overhead'" in refusal(["train.compile_mode=max-autotune"]).problem
 
 

@@ -43,7 +43,7 @@ class ConerfModel(LiveSceneModel):
         self.field = ConerfField(config.field, config.conerf, info.n_objects)
         if self.state_field is not None:
             self.state_field = FrameLatentStates(info.n_frames, info.n_objects, config.conerf.latent_dim,
-                                                 config.state.hidden)
+                                                 config.state.hidden, info.frame_times)
 
     def field_dims(self) -> tuple[int, list[tuple[int, int]] | None]:
         # the proposal fields are built from this; the main field is replaced by ConerfField

@@ -10,7 +10,7 @@ same sampler, trainer and losses a different field.
 from __future__ import annotations
 
 from collections.abc import Collection
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import torch
 from torch import nn
@@ -50,6 +50,22 @@ class SceneInfo:
     """State levels of the language targets."""
     train_frames: list[int] = field(default_factory=list)
     """Indices of the training frames (empty = all): the per-frame colour corrections have zero mean over them."""
+    frame_times: list[float] | None = None
+    """Each frame's time in [0, 1] by its number (``stages.scene.key_frame_states.frame_times``); None when the
+    frames are numbered evenly in file order (t = i / (n - 1)), as every run before this field had them."""
+
+    def to_dict(self) -> dict:
+        """The fields as saved in model.pt; ``frame_times`` only where set, so runs of evenly numbered frames keep
+        the bytes they had before the field existed."""
+        out = asdict(self)
+        if out["frame_times"] is None:
+            del out["frame_times"]
+        return out
+
+    def frame_time(self, index: int) -> float:
+        if self.frame_times is not None:
+            return self.frame_times[index]
+        return index / (self.n_frames - 1) if self.n_frames > 1 else 0.0
 
     @property
     def n_objects(self) -> int:
