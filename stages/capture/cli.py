@@ -74,6 +74,10 @@ def _dataset_parser() -> argparse.ArgumentParser:
     p.add_argument("--every", type=int, default=1, help="keep every n-th video frame")
     p.add_argument("--images", default="video", choices=("video", "truth"),
                    help="video: decoded video.mp4 frames (what a user has); truth: lossless truth/images PNGs")
+    p.add_argument("--no-masks", action="store_true",
+                   help="leave out the masks, as a room filmed without them (with --no-states: no objects at all)")
+    p.add_argument("--no-states", action="store_true",
+                   help="leave out the frames' states and the key frames, as a room filmed without key frames")
     p.add_argument("--force", action="store_true", help="replace an existing non-empty --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -191,7 +195,8 @@ def _run_dataset(argv: list[str]) -> int:
     out = Path(args.out)
     refuse_clobber(out, args.force)
     ds = capture_to_dataset(args.capture, out, split=args.split, split_n=args.split_n, every=args.every,
-                            images=args.images, progress=not args.no_progress, replace=args.force)
+                            images=args.images, progress=not args.no_progress, replace=args.force,
+                            masks=not args.no_masks, states=not args.no_states)
     splits = {s: len(ds.frames_in(s)) for s in ("train", "test")}
     print(f"{out}: valid scene dataset, {len(ds.frames)} frames {splits}, objects {ds.objects}, "
           f"{len(ds.key_frames)} key frames")

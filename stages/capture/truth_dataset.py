@@ -82,13 +82,16 @@ def _video_frames(path: Path, wanted: set[int], expected: int) -> dict[int, np.n
 
 def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: str = "alternate",
                        split_n: int = 10, every: int = 1, images: ImageSource = "video",
-                       progress: bool = True, replace: bool = False) -> SceneDataset:
+                       progress: bool = True, replace: bool = False, masks: bool = True,
+                       states: bool = True) -> SceneDataset:
     """Write the scene dataset of a capture's truth to ``out_dir`` (atomically) and return it, validated.
 
     ``every`` keeps every n-th video frame (source index 0, n, 2n, ...); key frames that fall
     on dropped frames are dropped with them. ``split`` is a ``stages.scene.make_split`` method
     applied to the kept frames in order. ``replace``: an existing ``out_dir`` that is not an earlier dataset
-    is replaced too (``--force``).
+    is replaced too (``--force``). ``masks`` / ``states`` False leave out the masks / the frames' states and the key
+    frames, as a room filmed without them; without both the room has no objects (nothing gives their pixels or
+    states): no mapping and no prompts either.
     """
     cap = Path(capture_dir)
     out_dir = Path(out_dir)
@@ -102,9 +105,11 @@ def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: s
         raise CaptureFolderError(tpath, "no frames", "regenerate the capture")
     scene_info = _load_json(cap / "truth" / "scene.json")
     object_ids, objects = _read_mapping(cap / "mapping.yaml")
-    key_frames = read_key_frames(cap / "key_frame_value.yaml", objects)
+    key_frames = read_key_frames(cap / "key_frame_value.yaml", objects) if states else {}
     prompts = read_yaml_mapping(cap / "prompts.yaml", "{name: {synonyms: [...], description: ...}}",
                                 error=CaptureFolderError, missing_ok=True)
+    if not masks and not states:
+        object_ids, objects, prompts = [], [], {}
 
     kept = [fr for fr in truth_frames if int(fr["source_index"]) % every == 0]
     splits = make_split(len(kept), split, n=split_n)  # type: ignore[arg-type]
@@ -129,7 +134,7 @@ def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: s
                     raise CaptureFolderError(cap / "truth" / "images" / name, "lossless frame missing",
                                              "regenerate with write_truth_images: true, or use --images video")
             cv2.imwrite(str(tmp / "images" / name), bgr)
-            if objects:  # a room without movable objects gets no masks: the dataset contract pairs masks with a mapping
+            if objects and masks:  # no masks without a mapping: the dataset contract pairs them
                 mpath = cap / "masks" / name
                 ids = cv2.imread(str(mpath), cv2.IMREAD_UNCHANGED)
                 if ids is None or ids.shape != (camera.height, camera.width):
@@ -138,7 +143,8 @@ def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: s
                 write_mask(tmp, frame_id_of(Path(name).stem),
                            label_map_to_onehot(id_to_channel[ids], len(objects)))
             frames.append(Frame(file_path=f"images/{name}", c2w=np.asarray(fr["transform_matrix"], dtype=np.float64),
-                                state={k: float(v) for k, v in fr["state"].items()}, split=sp, source_index=i))
+                                state={k: float(v) for k, v in fr["state"].items()} if states and objects else None,
+                                split=sp, source_index=i))
         known = {f.frame_id for f in frames}
         kept_keys = {fid: v for fid, v in key_frames.items() if fid in known}
         meta = {
@@ -147,6 +153,9 @@ def capture_to_dataset(capture_dir: str | Path, out_dir: str | Path, *, split: s
             "source": {"kind": "capture truth", "capture": str(cap.resolve()), "images": images, "every": every,
                        "split": split, "key_frames_dropped": sorted(set(key_frames) - known)},
         }
+        left_out = [item for item, kept in (("masks", masks), ("states", states)) if not kept]
+        if left_out:
+            meta["source"]["left_out"] = left_out
         ds = SceneDataset(root=tmp, camera=camera, frames=frames, objects=objects, object_ids=object_ids,
                           key_frames=kept_keys, scene_box=np.asarray(scene_info["scene_box"], dtype=np.float64),
                           prompts=prompts, meta=meta)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from stages.evaluate.unseen_states import OBSERVED_WITHIN
 from stages.scene import InputError
@@ -94,7 +95,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     ds = read_scene(data)
     scale = render_scale_for(ds, args.max_side) if args.max_side else args.scale
     truth = None
-    if args.truth:
+    if args.truth and not ds.objects:  # a static field: unseen combinations and locality move objects
+        print(f"{args.truth}: not used: the dataset has no objects, so there are no state combinations or locality "
+              "to test against the truth (held-out views only)", file=sys.stderr)
+    elif args.truth:
         same_world = str(ds.meta.get("units", "")).lower() != "colmap"
         truth = TruthSource.from_capture(args.truth, args.pose_alignment, same_world=same_world).after_turn(ds.meta)
         if sorted(truth.object_ids) != sorted(ds.objects):  # another room's truth: its renders would be compared

@@ -62,3 +62,18 @@ def test_a_room_without_objects_gives_a_dataset_without_masks(small_spec, tmp_pa
     ds = capture_to_dataset(capture, tmp_path / "ds", progress=False)
     validate_scene(read_scene(tmp_path / "ds"), deep=True)
     assert ds.objects == [] and len(ds.frames) == 4 and not (tmp_path / "ds" / "masks").exists()
+
+
+def test_masks_and_states_are_left_out_as_a_room_filmed_without_them(tiny_capture, tmp_path):
+    """A sheet row with `masks: no` / `key_frames: no`: the truth's masks and states are not the row's."""
+    common = ["dataset", "--capture", str(tiny_capture), "--images", "truth", "--no-progress"]
+    assert main([*common, "--out", str(tmp_path / "nomasks"), "--no-masks"]) == 0
+    ds = read_scene(tmp_path / "nomasks")
+    assert ds.objects and not ds.has_masks and all(f.state for f in ds.frames)
+    assert main([*common, "--out", str(tmp_path / "nostates"), "--no-states"]) == 0
+    ds = read_scene(tmp_path / "nostates")
+    assert ds.has_masks and not ds.key_frames and all(f.state is None for f in ds.frames)
+    assert main([*common, "--out", str(tmp_path / "static"), "--no-masks", "--no-states"]) == 0
+    ds = read_scene(tmp_path / "static")
+    assert ds.objects == [] and not ds.key_frames and not ds.prompts and not ds.has_masks
+    assert ds.meta["source"]["left_out"] == ["masks", "states"]

@@ -48,7 +48,10 @@ def mixed_plan(tmp_path_factory):
         {"scene": "filmed", "source": "video", "path": video, "poses": "estimate", "masks": root / "masks",
          "key_frames": root / "keys.yaml", "names": "no", "truth": "no", "methods": "livescene"},
         {"scene": "given", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
-         "truth": "yes", "methods": "livescene"}])
+         "truth": "yes", "methods": "livescene"},
+        *({"scene": f"static{poses}", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": poses,
+           "masks": "no", "key_frames": "no", "names": "no", "truth": "yes", "methods": "livescene"}
+          for poses in ("given", "estimate"))])
     return wf.dry_run()
 
 
@@ -86,6 +89,18 @@ def test_synthetic_with_given_poses_uses_the_truth_dataset(mixed_plan):
     assert {"capture", "capture_dataset", "language_targets", "train", "evaluate"} <= set(jobs)
     assert not {"frames", "poses", "pose_compare", "labels", "states", "assemble", "dataset_orient"} & set(jobs)
     assert all("--truth" in t and "--pose-alignment" not in t for t in jobs["evaluate"])
+
+
+def test_a_synthetic_room_filmed_without_masks_and_key_frames_is_a_static_field(mixed_plan):
+    """The capture's truth masks and states are not the row's: the dataset leaves them out, COLMAP gets no masks,
+    and the evaluation has no objects to test against the truth (held-out views only)."""
+    given = mixed_plan.scene_jobs("staticgiven")
+    assert "--no-masks --no-states" in given["capture_dataset"][0]
+    estimated = mixed_plan.scene_jobs("staticestimate")
+    assert "--masks" not in estimated["poses"][0] and len(estimated["pose_compare"]) == 1
+    for jobs in (given, estimated):
+        assert not any("--truth" in t for t in jobs["evaluate"]) and "--state-mode learned" in jobs["train"][0]
+    assert "--no-masks" not in mixed_plan.scene_jobs("given")["capture_dataset"][0]
 
 
 def test_config_error_names_file_key_and_type(workflow_copy):
@@ -150,6 +165,8 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
          "masks": "no", "key_frames": "no", "names": "no"},
         {"scene": "keyless", "source": "images", "path": tmp_path / "shots", "masks": tmp_path / "shots",
          "key_frames": "no", "names": "no"},
+        {"scene": "truthkeyless", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
+         "key_frames": "no", "names": "no", "truth": "yes"},
         *({"scene": ds.name, "source": "dataset", "path": ds, "poses": "given", "key_frames": "no", "names": "no"}
           for ds in (learned, keyed, static))])
     run = workflow_copy.snakemake("-n", "--cores", "1")
@@ -164,10 +181,11 @@ def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
         in run.output
     assert "line 7 (scene 'keyless'): column 'key_frames': the masks make objects, but without key frames" \
         in run.output
+    assert "line 8 (scene 'truthkeyless'): column 'key_frames': the masks make objects" in run.output
     assert "line 2 (scene 'none'): column 'key_frames'" not in run.output  # no masks: a static room
     # a ready dataset: its objects (mapping.yaml) need its key frames for learned states; without objects, or
     # with key frames, 'no' is fine
-    assert "line 8 (scene 'learned'): column 'key_frames': 'no' trains the dataset's objects" in run.output
+    assert "line 9 (scene 'learned'): column 'key_frames': 'no' trains the dataset's objects" in run.output
     assert "(scene 'keyed'): column 'key_frames'" not in run.output
     assert "(scene 'static'): column 'key_frames'" not in run.output
     assert "MissingInputException" not in run.output

@@ -35,6 +35,7 @@ rule capture_dataset:
         bench_path("capture_dataset")
     params:
         cli=LIVESCENE,
+        args=capture_dataset_args,
     threads: 1
     resources:
         mem_mb=2000,
@@ -42,4 +43,4 @@ rule capture_dataset:
     conda:
         ENV
     shell:
-        "{params.cli} capture dataset --capture {input:q} --out {output:q} --no-progress > {log:q} 2>&1"
+        "{params.cli} capture dataset --capture {input:q} --out {output:q} {params.args} --no-progress > {log:q} 2>&1"

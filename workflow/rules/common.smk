@@ -14,11 +14,22 @@ def evaluate_input(wildcards):
     scene = wildcards.scene
     files = dataset_input(wildcards)
     files["run"] = R(scene, "runs", wildcards.method, "run.json")
-    if has_truth(scene):
+    if tests_with_truth(scene):
         files["truth"] = truth_dir(scene)
         if needed(scene, "pose_compare"):
             files["pose_error"] = R(scene, "pose_error.json")
     return files
+
+
+def capture_dataset_args(wildcards):
+    """What the row leaves out of the dataset written from a synthetic capture's truth, as if it had been filmed
+    without it: masks, key frames (and the frames' states)."""
+    args = []
+    if not carries(wildcards.scene, "masks"):
+        args.append("--no-masks")
+    if not carries(wildcards.scene, "key_frames"):
+        args.append("--no-states")
+    return " ".join(args)
 
 
 def run_folder(wildcards, input):
@@ -169,8 +180,8 @@ def poses_masks(wildcards):
     """Id maps that keep SIFT features off the moving objects: the capture's, the user's folder, or the labels
     stage's maps of a mask file."""
     files = poses_input(wildcards)
-    if "capture" in files:
-        return f"--masks {q(Path(files['capture'], 'masks'))}"
+    if "capture" in files:  # a row filmed without masks gets none: the capture's truth masks are not the row's
+        return f"--masks {q(Path(files['capture'], 'masks'))}" if carries(wildcards.scene, "masks") else ""
     if "labels" in files:
         return f"--masks {q(Path(files['labels'], 'masks'))}"
     return f"--masks {q(files['masks'])}" if "masks" in files else ""

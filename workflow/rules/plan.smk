@@ -37,6 +37,16 @@ def has_truth(scene):
     return carries(scene, "truth")
 
 
+def is_static(scene):
+    """True when nothing gives the room's objects: no masks and no key frames (it trains as a static field)."""
+    return not carries(scene, "masks") and not carries(scene, "key_frames")
+
+
+def tests_with_truth(scene):
+    """True when the evaluation compares with the truth: unseen combinations and locality need objects."""
+    return has_truth(scene) and not is_static(scene)
+
+
 def has_names(scene):
     return carries(scene, "names")
 
@@ -122,9 +132,11 @@ def plan(scene):
                          "estimated poses vs truth" if framed and has_truth(scene)
                          else "no truth" if not has_truth(scene) else "poses were not estimated")
     labels = framed and carries(scene, "masks")
-    p["labels"] = (labels, "masks given" if labels else given if not framed else "scene has no masks")
+    p["labels"] = (labels, "masks given" if labels else "scene has no masks" if not carries(scene, "masks")
+                   else given)
     states = framed and carries(scene, "key_frames")
-    p["states"] = (states, "key frames given" if states else given if not framed else "scene has no key frames")
+    p["states"] = (states, "key frames given" if states else "scene has no key frames"
+                   if not carries(scene, "key_frames") else given)
     p["assemble"] = (framed, "joins frames, poses, labels, states" if framed
                      else "dataset comes ready" if kind == "dataset" else "dataset written from the capture truth")
     p["dataset_orient"] = (orients_ready_dataset(scene),
@@ -141,8 +153,10 @@ def plan(scene):
     for m in METHODS:
         chosen = m in methods(scene)
         p[f"train[{m}]"] = (chosen, "listed for this scene" if chosen else "method not listed for this scene")
-        p[f"evaluate[{m}]"] = (chosen, ("with truth (unseen combinations)" if has_truth(scene) else
-                                        "held-out views only: no truth") if chosen else "method not trained")
+        p[f"evaluate[{m}]"] = (chosen, ("with truth (unseen combinations)" if tests_with_truth(scene) else
+                                        "held-out views only: no objects to test against the truth"
+                                        if has_truth(scene) else "held-out views only: no truth")
+                               if chosen else "method not trained")
     for m in methods(scene):
         sweep = m in config["report"]["sweep_methods"]
         p[f"sweep[{m}]"] = (sweep, "state sweeps for the sliders" if sweep else "not in report.sweep_methods")

@@ -101,7 +101,8 @@ def _row_problems(record):
                             "existing file or folder, or write 'no'")
     # masks make objects; their states come only from key frames (the states stage, or learned between key
     # frames): refused here rather than by the trainer after frames, COLMAP and labels have run
-    if frames_assembled(kind, poses) and record.get("masks", "yes") != "no" and record.get("key_frames", "yes") == "no":
+    if (frames_assembled(kind, poses) or kind == "synthetic") and record.get("masks", "yes") != "no" \
+            and record.get("key_frames", "yes") == "no":
         problems.append("column 'key_frames': the masks make objects, but without key frames nothing gives their "
                         "states (docs/labels-states.md); fix: give the key-frame file (key_frame_value.yaml, "
                         "annotations.yml or CSV), or write 'no' in column 'masks' to train the room as a static field")
@@ -113,7 +114,12 @@ def _row_problems(record):
         problems.append(f"column 'key_frames': 'no' trains the dataset's objects ({root / 'mapping.yaml'}) with "
                         "learned states, which its key_frame_value.yaml supervises, and it has none; fix: write 'yes' "
                         "to train on the states its transforms.json gives every frame, or add key_frame_value.yaml")
-    if record.get("state_ranges") and not (frames_assembled(kind, poses) and record.get("key_frames", "yes") != "no"):
+    if record.get("state_ranges") and kind == "dataset":
+        problems.append("column 'state_ranges': a ready dataset's key frames are normalised by the trainer, which "
+                        f"reads fixed ranges from the dataset itself; fix: write them into {root / 'scene.json'} as "
+                        "\"state_ranges\": {\"OBJECT\": [LO, HI]} (docs/data-contract.md, \"Key frames and the "
+                        "time axis\") and leave the column empty")
+    elif record.get("state_ranges") and not (frames_assembled(kind, poses) and record.get("key_frames", "yes") != "no"):
         problems.append("column 'state_ranges': only key frames that the states stage interpolates are normalised "
                         "(a video, image-folder or synthetic source with key frames and estimated or imported poses); "
                         "fix: leave it empty for this row")
