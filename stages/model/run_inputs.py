@@ -18,17 +18,17 @@ import torch
 
 EXECUTION_ONLY: dict[str, frozenset[str] | None] = {
     # None: the whole section; a set: those keys of it
-    "train": frozenset({"max_steps", "max_seconds", "eval_every", "eval_rays", "checkpoint_every",
-                        "keep_checkpoints", "log_every", "max_nonfinite", "render_chunk", "threads", "compile",
-                        "compile_mode", "cuda_graphs"}),
+    "train": frozenset({"eval_every", "eval_rays", "checkpoint_every", "keep_checkpoints", "log_every",
+                        "max_nonfinite", "render_chunk", "compile", "compile_mode", "cuda_graphs"}),
     "trust": None,
     "data": None,
     "language_targets": None,
     "exposure": None,
     "preset": None,
 }
-"""Config entries a resumed run may change: how long and how it runs, where the inputs live (their contents are in
-the data digest), and the report's floors. Everything else defines what is learned."""
+"""Config entries a resumed run may change: how it runs, where the inputs live (their contents are in the data
+digest), and the report's floors. Everything else defines what is learned, ``max_steps`` and ``max_seconds`` too
+(the learning rate decays over them) and ``threads`` (the order of torch's float sums)."""
 
 
 def _learned_part(config: dict[str, Any]) -> dict[str, Any]:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import errno
+import json
 import math
 import random
 import resource
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import yaml
 from tqdm import tqdm
 
 from stages.scene import InputError, SceneDataset, SceneError, atomic_path, read_scene, write_json, write_yaml
@@ -627,6 +629,8 @@ class Trainer:
         elif (self.out / "checkpoints").is_dir() and any((self.out / "checkpoints").glob("step_*.pt")):
             raise InputError(self.out, "already holds checkpoints of a run",
                              "pass --resume to continue it, or choose a new --out folder")
+        if self.step >= cfg.train.max_steps and (self.out / "run.json").is_file() and (self.out / "model.pt").is_file():
+            return self._already_finished(cfg)
         write_yaml(self.out / "config.yaml", cfg.to_dict())
         handlers = {}
         try:  # held until the run's last checkpoint is written: a second signal during the save changes nothing
@@ -639,6 +643,20 @@ class Trainer:
         finally:
             for sig, handler in handlers.items():
                 signal.signal(sig, handler)
+
+    def _already_finished(self, cfg: RunConfig) -> dict[str, Any]:
+        """A finished run resumed with nothing left to train (a rerun after a setting of how it runs changed, such
+        as a trust floor): its weights, log and records stay those of the training; config.yaml takes the new trust
+        floors, which judge it, and run.json is written again unchanged (a rerun job's output is new)."""
+        run = json.loads((self.out / "run.json").read_text())
+        trained = yaml.safe_load((self.out / "config.yaml").read_text()) if (self.out / "config.yaml").is_file() \
+            else cfg.to_dict()
+        trained["trust"] = cfg.to_dict()["trust"]
+        write_yaml(self.out / "config.yaml", trained)
+        write_json(self.out / "run.json", run)
+        print(f"{self.out}: finished at step {self.step}: nothing to train, its model.pt and run.json kept",
+              file=sys.stderr)
+        return run
 
     def _train(self, cfg: RunConfig) -> dict[str, Any]:
         if self.step < cfg.train.max_steps:

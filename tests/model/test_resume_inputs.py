@@ -8,6 +8,7 @@ import shutil
 
 import pytest
 import torch
+import yaml
 
 from stages.model import Trainer
 from stages.model.run_inputs import config_differences, data_digest
@@ -61,17 +62,44 @@ def test_restart_stale_trains_from_step_zero_on_the_new_data(tiny_dataset, tmp_p
         torch.testing.assert_close(a[k], b[k], rtol=0, atol=0, equal_nan=True, msg=k)
 
 
-def test_config_change_is_named_and_longer_training_still_resumes(tiny_dataset, tmp_path, tiny_config):
+def test_config_change_is_named_and_more_steps_are_another_run(tiny_dataset, tmp_path, tiny_config):
     out = tmp_path / "run"
     _finished(tiny_config(tiny_dataset.root, steps=3), out)
     with pytest.raises(InputError, match=r"config differs in train\.lr"):
         Trainer(tiny_config(tiny_dataset.root, "train.lr=0.001", steps=3), out, device="cpu", progress=False,
                 resume=True).train()
-    # more steps, another thread count: the same run, continued
-    Trainer(tiny_config(tiny_dataset.root, "train.threads=2", steps=5), out, device="cpu", progress=False,
-            resume=True).train()
+    # the learning rate decays over max_steps, and the thread count orders the float sums: other runs
+    for change in (["train.threads=3"], ["train.max_seconds=100"]):
+        with pytest.raises(InputError, match="config differs in train"):
+            Trainer(tiny_config(tiny_dataset.root, *change, steps=3), out, device="cpu", progress=False,
+                    resume=True).train()
+    with pytest.raises(InputError, match=r"config differs in train\.max_steps"):
+        Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True).train()
+    fresh = tmp_path / "fresh"
+    _finished(tiny_config(tiny_dataset.root, steps=5), fresh)
+    Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True,
+            restart_stale=True).train()
     with (out / "train_log.csv").open() as fh:
         assert [int(r["step"]) for r in csv.DictReader(fh)] == [1, 2, 3, 4, 5]
+    a = torch.load(out / "model.pt", weights_only=True)["state_dict"]
+    b = torch.load(fresh / "model.pt", weights_only=True)["state_dict"]
+    for k in a:  # five steps from step 0, as a fresh folder trains them: not three resumed under another schedule
+        torch.testing.assert_close(a[k], b[k], rtol=0, atol=0, equal_nan=True, msg=k)
+
+
+def test_a_finished_run_rerun_with_nothing_to_train_keeps_its_records(tiny_dataset, tmp_path, tiny_config):
+    """A workflow rerun after a setting of how a run runs changed (eval_every, a trust floor) trains nothing: its
+    run.json (eval PSNR, peak memory) and model.pt stay the training's; config.yaml takes the new floors."""
+    out = tmp_path / "run"
+    _finished(tiny_config(tiny_dataset.root, steps=3), out)
+    before = json.loads((out / "run.json").read_text())
+    weights = (out / "model.pt").read_bytes()
+    Trainer(tiny_config(tiny_dataset.root, "train.eval_every=1", "trust.min_steps=2", steps=3), out, device="cpu",
+            progress=False, resume=True).train()
+    assert json.loads((out / "run.json").read_text()) == before and before["eval_psnr"] is not None
+    assert (out / "model.pt").read_bytes() == weights
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert config["trust"]["min_steps"] == 2 and config["train"]["eval_every"] != 1
 
 
 def test_cli_restart_stale_flag(tiny_dataset, tmp_path, tiny_overrides, capsys):
@@ -91,8 +119,8 @@ def test_digest_and_differences_helpers():
     a = {"x": torch.arange(4, dtype=torch.float32), "y": None}
     assert data_digest(a) == data_digest({"y": None, "x": torch.arange(4, dtype=torch.float32)})
     assert data_digest(a) != data_digest({"x": torch.arange(4, dtype=torch.float64), "y": None})
-    old = {"seed": 0, "data": "a", "train": {"lr": 0.02, "max_steps": 10}, "trust": {"min_psnr": 20.0}}
-    new = {"seed": 1, "data": "b", "train": {"lr": 0.02, "max_steps": 99}, "trust": {"min_psnr": 5.0}}
+    old = {"seed": 0, "data": "a", "train": {"lr": 0.02, "eval_every": 10}, "trust": {"min_psnr": 20.0}}
+    new = {"seed": 1, "data": "b", "train": {"lr": 0.02, "eval_every": 99}, "trust": {"min_psnr": 5.0}}
     assert config_differences(old, new) == ["seed"]
     # a checkpoint written before train.compile_mode existed resumes under any mode: how it runs, not what it learns
     new["train"]["compile_mode"] = "reduce-overhead"

@@ -99,8 +99,18 @@ def test_a_checkpoint_from_another_device_resumes_with_the_jitter_reseeded(tiny_
     """A run begun on a GPU and continued on a CPU (or back): the generator states of one device do not fit the
     other's generators, so the jitter is reseeded from the step; training goes on and says so."""
     first = tmp_path / "first"
-    Trainer(tiny_config(tiny_dataset.root, "train.checkpoint_every=2", steps=2), first, device="cpu",
-            progress=False).train()
+    trainer = Trainer(tiny_config(tiny_dataset.root, "train.checkpoint_every=2", steps=4), first, device="cpu",
+                      progress=False)
+    original = trainer.train_step
+
+    def step_then_stop():
+        result = original()
+        if trainer.step == 1:  # stopped after its second step, as a SIGTERM stops it
+            trainer.request_stop("sigterm")
+        return result
+
+    trainer.train_step = step_then_stop
+    trainer.train()
     ckpt = first / "checkpoints" / "step_000002.pt"
     state = torch.load(ckpt, weights_only=False)
     assert state["device_type"] == "cpu"
@@ -267,24 +277,27 @@ def test_objects_without_any_mask_are_refused_for_livescene(tiny_dataset, tmp_pa
     Trainer(tiny_config(root, "method=mk-planes", steps=2), tmp_path / "mk", device="cpu", progress=False)
 
 
-def test_a_finished_run_resumed_for_more_steps_is_unfinished_until_they_are_done(tiny_dataset, tmp_path,
-                                                                                   tiny_config):
+def test_a_finished_run_retrained_for_more_steps_is_unfinished_until_they_are_done(tiny_dataset, tmp_path,
+                                                                                     tiny_config):
+    """More steps are another run (the learning rate decays over them): it starts over, and until it is done the
+    old run.json and model.pt no longer pose as its result."""
     out = tmp_path / "run"
     Trainer(tiny_config(tiny_dataset.root, steps=3), out, device="cpu", progress=False).train()
     assert (out / "run.json").is_file() and (out / "model.pt").is_file()
-    trainer = Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True)
+    trainer = Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True,
+                      restart_stale=True)
     original = trainer.train_step
 
     def step_then_signal():
         result = original()
-        if trainer.step == 3:  # the first of the two new steps: a SIGTERM arrives
+        if trainer.step == 1:  # the first step of the new run: a SIGTERM arrives
             os.kill(os.getpid(), signal.SIGTERM)
         return result
 
     trainer.train_step = step_then_signal
-    assert trainer.train() == {"status": "sigterm", "step": 4}
+    assert trainer.train() == {"status": "sigterm", "step": 2}
     # the 3-step run.json and model.pt no longer pose as the run's result; the interrupted step is checkpointed
     assert not (out / "run.json").exists() and not (out / "model.pt").exists()
-    assert (out / "checkpoints" / "step_000004.pt").is_file()
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["step_000002.pt"]
     Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True).train()
     assert json.loads((out / "run.json").read_text())["steps"] == 5
