@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -433,8 +434,15 @@ def load_config(preset: str = "gpu-paper", overrides: list[str] | None = None, *
     # no method named: the config trains the default method, so it gets that method's overlay too
     method = method or RunConfig.method
     if method:  # the overlay sits between the preset and the explicit overrides, which win
-        overlay = method_overlay(str(method), path.stem)
-        from_mapping(RunConfig, overlay, path=METHOD_DIR / f"{method}.yaml", root=path.stem)
+        # a preset file of the user's names the scale it varies in its own `preset:` key (a copy of cpu-demo.yaml
+        # with `preset: cpu-demo` keeps cpu-demo's method overlays); else its name is the scale
+        scale = str(data["preset"])
+        overlay = method_overlay(str(method), scale)
+        if not overlay and (METHOD_DIR / f"{method}.yaml").is_file() and not (PRESET_DIR / f"{scale}.yaml").is_file():
+            warnings.warn(f"{path}: {METHOD_DIR / f'{method}.yaml'} has no entry {scale!r}, so {method} trains "
+                          "without its overlay of settings; fix: write `preset: cpu-demo` (or gpu-paper) in the preset "
+                          "file to take that scale's overlay", stacklevel=2)
+        from_mapping(RunConfig, overlay, path=METHOD_DIR / f"{method}.yaml", root=scale)
         _merge(data, overlay)
     for text, keys, value in parsed:
         node = data
@@ -453,7 +461,7 @@ TRAIN_RANGES: dict[str, tuple[float, str]] = {
     "batch_rays": (1, "rays per step, e.g. 4096"), "eval_rays": (1, "held-out rays, e.g. 4096"),
     "render_chunk": (1, "rays per render pass, e.g. 4096"), "log_every": (0, "steps, e.g. 10"),
     "checkpoint_every": (0, "steps (0 = only at the end)"), "keep_checkpoints": (0, "checkpoints, e.g. 2"),
-    "max_steps": (0, "steps"), "max_seconds": (0, "seconds (0 = no budget)"), "eval_every": (0, "steps (0 = never)"),
+    "max_steps": (1, "steps"), "max_seconds": (0, "seconds (0 = no budget)"), "eval_every": (0, "steps (0 = never)"),
     "warmup_steps": (0, "steps"), "lr_final_ratio": (0, "a ratio, e.g. 0.0"), "threads": (0, "threads (0 = torch's)"),
     "max_nonfinite": (0, "steps, e.g. 20"),
 }
@@ -472,6 +480,50 @@ def _check_ranges(config: RunConfig, preset: Path) -> None:
         if not (math.isfinite(value) and 0 < value <= 10):
             raise InputError(f"train.{name}", f"{value} is not a finite value in (0, 10] (in {preset} or a --set "
                              "item)", "give e.g. train.lr=0.02, train.adam_eps=1e-12")
+    for key, problem, fix in _model_problems(config.model):
+        raise InputError(f"model.{key}", f"{problem} (in {preset}, its method overlay or a --set item)", fix)
+
+
+def _model_problems(m: ModelConfig) -> list[tuple[str, str, str]]:
+    """(key, problem, fix) of model values no field can be built from or whose meaning is undefined."""
+    out: list[tuple[str, str, str]] = []
+
+    def positive(key: str, value: int | float, what: str) -> None:
+        if not value >= 1:
+            out.append((key, f"{value} is not at least 1", f"give a positive number of {what}"))
+
+    for key, value, what in [("field.base_resolution", m.field.base_resolution, "grid vertices"),
+                             ("field.k_resolution", m.field.k_resolution, "grid vertices"),
+                             ("field.channels", m.field.channels, "channels"),
+                             ("proposal.channels", m.proposal.channels, "channels"),
+                             ("probability.resolution", m.probability.resolution, "grid vertices"),
+                             ("probability.channels", m.probability.channels, "channels"),
+                             ("sampling.num_samples", m.sampling.num_samples, "samples per ray")]:
+        positive(key, value, what)
+    if not m.field.scales or any(v < 1 for v in m.field.scales):
+        out.append(("field.scales", f"{m.field.scales} is not a list of positive multipliers", "give e.g. [1, 2]"))
+    if any(len(r) != 2 or min(r) < 1 for r in m.proposal.resolutions):
+        out.append(("proposal.resolutions", f"{m.proposal.resolutions} is not a list of [spatial, k] sizes >= 1",
+                    "give e.g. [[32, 16]]"))
+    if len(m.sampling.num_proposal_samples) != len(m.proposal.resolutions) or \
+            any(v < 1 for v in m.sampling.num_proposal_samples):
+        out.append(("sampling.num_proposal_samples", f"{m.sampling.num_proposal_samples} does not give one positive "
+                    f"count per proposal field ({len(m.proposal.resolutions)})", "give one count per field"))
+    for key, pair in [("field.init_range", m.field.init_range), ("proposal.init_range", m.proposal.init_range),
+                      ("probability.init_range", m.probability.init_range)]:
+        if len(pair) != 2 or not pair[0] < pair[1]:
+            out.append((key, f"{pair} is not [low, high] with low below high", "give e.g. [0.1, 0.5]"))
+    if len(m.sampling.background) != 3 or not all(0.0 <= v <= 1.0 for v in m.sampling.background):
+        out.append(("sampling.background", f"{m.sampling.background} is not an RGB colour in [0, 1]",
+                    "give three values, e.g. [1.0, 1.0, 1.0]"))
+    if not 0.0 <= m.probability.rejection_threshold < 1.0:
+        out.append(("probability.rejection_threshold", f"{m.probability.rejection_threshold} is not in [0, 1)",
+                    "give a probability below 1 (at 1 every sample is rejected: no object is ever moved)"))
+    for f in dataclasses.fields(m.losses):
+        value = getattr(m.losses, f.name)
+        if isinstance(value, float) and not (math.isfinite(value) and value >= 0):
+            out.append((f"losses.{f.name}", f"{value} is not a finite weight >= 0", "give a weight >= 0"))
+    return out
 
 
 def _check_override(text: str, keys: list[str], value: Any) -> None:

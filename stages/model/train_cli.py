@@ -7,6 +7,7 @@ import json
 import signal
 import sys
 
+from stages.scene import InputError
 from stages.scene.cli_errors import ErrorExit, cli_errors
 
 from .config import load_config
@@ -40,9 +41,20 @@ def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
     return p
 
 
+FLAG_FIELDS = {"preset": "preset", "method": "method", "data": "data"}
+"""Top-level config fields whose option always wins (or, for the preset, is read before any --set)."""
+
+
 @cli_errors(KeyError, ErrorExit(TrainingDiverged, 1, "training diverged: "))  # KeyError: an unknown --method
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    for item in args.overrides:  # the options below win over a --set of their field: refuse it rather than drop it
+        key = item.partition("=")[0].strip()
+        if key in FLAG_FIELDS:
+            raise InputError("--set", f"{item!r} sets a field that --{FLAG_FIELDS[key]} gives",
+                             f"pass --{FLAG_FIELDS[key]} instead")
+    if args.device not in ("auto", "cpu", "cuda") and not args.device.startswith("cuda:"):
+        raise InputError("--device", f"{args.device!r} is not a device", "pass auto, cpu, cuda or cuda:N")
     overrides = list(args.overrides)
     if args.state_mode:
         overrides.append(f"model.state.mode={args.state_mode}")

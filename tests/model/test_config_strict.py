@@ -134,8 +134,41 @@ def test_train_cli_refuses_a_bad_set_value_with_one_line(tmp_path, capsys):
     ("train.lr=-1", "train.lr: -1.0 is not a finite value in (0, 10]"),
     ("train.lr=1e30", "train.lr: 1e+30 is not a finite value in (0, 10]"),
     ("train.max_seconds=.nan", "train.max_seconds: nan is out of range"),
+    ("train.max_steps=0", "train.max_steps: 0 is out of range"),
+    ("model.field.base_resolution=0", "model.field.base_resolution: 0 is not at least 1"),
+    ("model.field.scales=[]", "model.field.scales: [] is not a list of positive multipliers"),
+    ("model.probability.channels=0", "model.probability.channels: 0 is not at least 1"),
+    ("model.sampling.num_proposal_samples=[32,16]", "model.sampling.num_proposal_samples: [32, 16] does not give"),
+    ("model.sampling.background=[1,1]", "model.sampling.background: [1.0, 1.0] is not an RGB colour"),
+    ("model.field.init_range=[0.5,0.1]", "model.field.init_range: [0.5, 0.1] is not [low, high]"),
+    ("model.probability.rejection_threshold=1", "model.probability.rejection_threshold: 1.0 is not in [0, 1)"),
+    ("model.losses.rgb=-1", "model.losses.rgb: -1.0 is not a finite weight >= 0"),
 ])
 def test_out_of_range_train_values_are_refused_with_the_fix(item, message):
     with pytest.raises(InputError) as info:
         load_config("cpu-demo", [item])
     assert str(info.value).startswith(message) and "fix: give" in str(info.value)
+
+
+def test_the_train_cli_refuses_a_set_its_options_give_and_an_unknown_device(tmp_path, capsys):
+    args = ["--data", str(tmp_path / "no-dataset"), "--out", str(tmp_path / "run")]
+    assert train_main([*args, "--set", "preset=gpu-paper"]) == 2  # was recorded as gpu-paper, trained cpu-demo
+    assert "fix: pass --preset instead" in capsys.readouterr().err
+    assert train_main([*args, "--set", "method=conerf"]) == 2  # was dropped for --method's default
+    assert "fix: pass --method instead" in capsys.readouterr().err
+    assert train_main([*args, "--device", "gpu"]) == 2
+    assert "'gpu' is not a device" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_preset_file_takes_the_overlays_of_the_scale_it_names(tmp_path):
+    from stages.model.config import PRESET_DIR
+
+    copy = tmp_path / "mypreset.yaml"
+    copy.write_text((PRESET_DIR / "cpu-demo.yaml").read_text())
+    with pytest.warns(UserWarning, match="trains without its overlay"):
+        bare = load_config(str(copy), method="livescene")
+    copy.write_text("preset: cpu-demo\n" + (PRESET_DIR / "cpu-demo.yaml").read_text())
+    named = load_config(str(copy), method="livescene")
+    assert named.to_dict() == load_config("cpu-demo", method="livescene").to_dict()
+    assert bare.model.losses.mask_levels != named.model.losses.mask_levels  # the overlay's settings

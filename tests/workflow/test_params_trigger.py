@@ -62,3 +62,32 @@ def test_no_rule_setting_escapes_the_params_trigger():
             if taken & {"input", "output", "threads", "resources"} and name.group(1) not in DERIVED_OK:
                 derived.append(f"{file} rule {rule}: {name.group(1)}{tuple(functions[name.group(1)])}")
     assert not derived, "params Snakemake would not rerun on (take the wildcards alone):\n" + "\n".join(derived)
+
+
+def _params_blocks() -> dict[str, str]:
+    """rule -> the text of its ``params:`` block."""
+    out = {}
+    for path in RULES.glob("*.smk"):
+        for m in re.finditer(r"^(?:rule|checkpoint) (\w+):\n(.*?)(?=^(?:rule|checkpoint) |\Z)", path.read_text(),
+                             re.M | re.S):
+            block = re.search(r"^    params:\n(.*?)(?=^    \w)", m.group(2), re.M | re.S)
+            if block:
+                out[m.group(1)] = block.group(1)
+    return out
+
+
+def test_a_rule_with_several_settings_names_them_in_one_param():
+    """Snakemake compares params as a set of values without names: with ``max_views`` and ``max_locality_pairs``
+    as two params, 1 -> 40 beside 40 changed nothing it compares. Every config value such a rule carries is also
+    in its ``settings=named(...)`` param, which any change changes."""
+    setting = r"config(?:\[\"\w+\"\])+"
+    missing = []
+    for rule, text in _params_blocks().items():
+        entries = re.split(r"^        (?=\w+\s*=)", text, flags=re.M)  # one entry with its continuation lines
+        named = "".join(e for e in entries if re.match(r"\w+\s*=\s*named\(", e))
+        loose = [set(re.findall(setting, e)) for e in entries if e and not re.match(r"\w+\s*=\s*named\(", e)]
+        loose = [refs for refs in loose if refs]
+        if len(loose) < 2:  # one param can only change as a whole
+            continue
+        missing += [f"{rule}: {key}" for key in sorted(set().union(*loose) - set(re.findall(setting, named)))]
+    assert not missing, "settings outside the rule's named(...) param:\n" + "\n".join(missing)

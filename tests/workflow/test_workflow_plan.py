@@ -113,6 +113,16 @@ def test_config_error_names_file_key_and_type(workflow_copy):
     assert not (workflow_copy.root / "results").exists()
 
 
+def test_a_preset_that_names_no_file_and_a_method_given_twice_are_refused(workflow_copy):
+    """A preset typo had dropped the trainings it could not feed: "Nothing to be done" over the old report."""
+    typo = workflow_copy.write_config(preset="gpu-papr")
+    run = workflow_copy.snakemake("-n", "--cores", "1", "--configfile", str(typo))
+    assert run.code != 0 and "key 'preset': preset 'gpu-papr' not found" in run.output
+    twice = workflow_copy.write_config(methods=["livescene", "livescene"])
+    run = workflow_copy.snakemake("-n", "--cores", "1", "--configfile", str(twice))
+    assert run.code != 0 and "key 'methods'" in run.output
+
+
 def test_missing_masks_policy_reaches_the_labels_stage_and_is_checked(workflow_copy):
     leave = workflow_copy.write_config(labels={"missing_masks": "leave"})
     jobs = workflow_copy.dry_run("--configfile", str(leave)).scene_jobs("demo")

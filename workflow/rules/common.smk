@@ -5,6 +5,13 @@
 # --- input functions and parameters of the stage rules ------------------------------------
 
 
+def named(**settings):
+    """A rule's scalar settings with their names, as one param. Snakemake compares a job's params as a set of values
+    without names, so a setting changed to the value another param has (max_views 1 -> 40 beside max_locality_pairs
+    40) would rerun nothing; this one value changes with any of them."""
+    return json.dumps(settings, sort_keys=True)
+
+
 def q(path):
     """A path as one shell word (quoted only when it holds spaces or other shell characters, as Snakemake's :q)."""
     return shlex.quote(str(path))

@@ -28,6 +28,10 @@ rule evaluate:
         max_pairs=config["evaluate"]["max_locality_pairs"],
         max_side=config["evaluate"]["max_side"],
         device=config["device"],
+        settings=named(views=config["evaluate"]["max_views"], unseen=config["evaluate"]["unseen_views"],
+                       max_unseen=config["evaluate"]["max_unseen_renders"],
+                       max_pairs=config["evaluate"]["max_locality_pairs"], max_side=config["evaluate"]["max_side"],
+                       device=config["device"]),
     threads: 2
     resources:
         mem_mb=6000,

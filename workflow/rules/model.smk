@@ -26,6 +26,9 @@ rule train:
         # the configured count, not {threads}: Snakemake scales that down to --cores, and torch's reductions (so the
         # weights) depend on the thread count
         torch_threads=config["train"]["threads"],
+        settings=named(preset=config["preset"], steps=config["train"]["steps"],
+                       seconds=config["train"]["max_seconds"], eval_every=config["train"]["eval_every"],
+                       seed=config["seed"], device=config["device"], threads=config["train"]["threads"]),
     threads: config["train"]["threads"]
     # a free core goes to a waiting training before an evaluation or export: every method's evaluation waits for
     # its training, so the last training finishing early shortens the job (docs/workflow.md, "Machines")

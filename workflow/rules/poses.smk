@@ -21,6 +21,8 @@ rule poses:
         seed=config["seed"],
         matcher=config["poses"]["matcher"],
         features=config["poses"]["max_features"],
+        settings=named(seed=config["seed"], matcher=config["poses"]["matcher"],
+                       features=config["poses"]["max_features"]),
     # COLMAP runs on one thread here (its default, docs/poses.md "Repeatability": more threads give other poses each
     # run), so the rule takes one core: with two it waited for both to be free, behind every one-core training and
     # evaluation of a sheet, and left one idle

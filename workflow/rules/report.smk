@@ -17,6 +17,8 @@ rule sweep:
         steps=config["report"]["sweep_steps"],
         scale=config["report"]["sweep_scale"],
         device=config["device"],
+        settings=named(steps=config["report"]["sweep_steps"], scale=config["report"]["sweep_scale"],
+                       device=config["device"]),
     threads: 2
     resources:
         mem_mb=4000,

@@ -30,15 +30,31 @@ def _check_config(cfg):
     the expected type (snakemake's own message stops at the first)."""
     try:
         validate(cfg, schema=str(SCHEMAS / "config.schema.yaml"), set_default=True)
-        return
     except WorkflowError:
         pass
+    else:
+        _check_preset(cfg["preset"])
+        return
     schema = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())
     errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(cfg), key=lambda e: list(e.absolute_path))
     files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
     lines = "\n".join(f"  - {_schema_problem(e)}" for e in errors)
     raise WorkflowError(f"invalid workflow config in {', '.join(files)}:\n{lines}\n"
                         f"fix: correct these keys (schema: {SCHEMAS / 'config.schema.yaml'})")
+
+
+def _check_preset(preset):
+    """A preset that names no file: Snakemake would drop the trainings it cannot feed and, with a report already
+    built, say "Nothing to be done" (the typo silently ignored)."""
+    from stages.model.config import preset_path
+    from stages.scene import InputError
+
+    try:
+        preset_path(str(preset))
+    except InputError as exc:
+        files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
+        raise WorkflowError(f"invalid workflow config in {', '.join(files)}: key 'preset': {exc.problem}; "
+                            f"fix: {exc.fix}") from None
 
 
 ITEM_COLUMNS = ("masks", "key_frames", "names", "prompts")
