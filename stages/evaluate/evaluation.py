@@ -115,6 +115,13 @@ def _cut(views: int, asked: int, available: int) -> bool:
     return min(views, available) < min(asked, available)
 
 
+def grounding_figure(source: str, query: str, frame_id: str) -> str:
+    """The file name of a relevancy map in ``grounding/``: the query's letters of any script kept, spaces as '-',
+    path separators replaced (the report finds the map by this name)."""
+    stem = query.replace(" ", "-").replace("/", "-").replace("\\", "-")
+    return f"{source}_{stem}_{frame_id}.png"
+
+
 def _to_png(path: Path, rgb: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     img = np.clip(np.asarray(rgb, dtype=np.float64) * 255.0 + 0.5, 0, 255).astype(np.uint8)
@@ -404,8 +411,7 @@ class Evaluator:
                     ious.append(iou(rel > self.config.grounding_threshold, truth))
                     frames.append(frame.frame_id)  # per-view IoUs pair up across methods by (query, frame)
                     if out_dir is not None and self.config.save_renders and len(ious) == 1:
-                        slug = q["query"].replace(" ", "-")
-                        _to_png(out_dir / "grounding" / f"{source}_{slug}_{frame.frame_id}.png", rel)
+                        _to_png(out_dir / "grounding" / grounding_figure(source, q["query"], frame.frame_id), rel)
         for entry in entries:
             for source in sources:
                 per_view, frames = entry[source]["per_view"], entry[source]["frames"]

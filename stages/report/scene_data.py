@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -244,8 +245,11 @@ def collect_method(name: str, inputs: ReportInputs) -> MethodData:
 def collect_scene(scene: str, inputs: ReportInputs, *, methods: list[str] | None = None,
                   plan: dict[str, dict]) -> SceneData:
     """Read every input of the page from where ``inputs`` says it is; ``methods`` defaults to the manifest's."""
-    sd = SceneData(scene=scene, plan=plan, inputs=inputs,
-                   benchmarks=read_benchmarks(inputs.benchmarks) if inputs.benchmarks else {})
+    benchmarks = read_benchmarks(inputs.benchmarks) if inputs.benchmarks else {}
+    if plan:  # the jobs of this plan only: a method dropped from the row, or the page's own earlier build, left theirs
+        planned = {re.sub(r"\[(.*)\]", r"_\1", rule) for rule, entry in plan.items() if entry.get("needed")}
+        benchmarks = {stem: v for stem, v in benchmarks.items() if stem in planned}
+    sd = SceneData(scene=scene, plan=plan, inputs=inputs, benchmarks=benchmarks)
     sd.capture = _json_in(inputs.capture, "capture.json")
     sd.frames = _json_in(inputs.frames, "frames.json")
     sd.poses = _json_in(inputs.poses, "poses.json")

@@ -10,6 +10,7 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
+from stages.evaluate.evaluation import grounding_figure
 from stages.scene.dataset import spans_closed_to_open
 from stages.scene.machine import machine_line
 
@@ -79,16 +80,23 @@ def section_rules(sd: SceneData) -> str:
     return table(["rule", "status", "why", "wall s"], rows)
 
 
+def _scene_seconds(sd: SceneData) -> float:
+    """The scene's own jobs' wall seconds (the shared stability suite left out: the index adds scenes up)."""
+    return sum(v["s"] for k, v in sd.benchmarks.items() if k != "stability" and math.isfinite(v["s"]))
+
+
 def section_timings(sd: SceneData) -> str:
     if not sd.benchmarks:
         folder = f"in {sd.inputs.benchmarks}/" if sd.inputs.benchmarks is not None else "given"
         return missing(f"No benchmark files {folder}: no rule of this scene has run yet.")
     items = sorted(((k, v["s"]) for k, v in sd.benchmarks.items() if math.isfinite(v["s"])), key=lambda kv: -kv[1])
-    total = sum(v for _, v in items)
+    total = _scene_seconds(sd)
     rows = [[escape(k), v["s"], v["cpu_time"], v["max_rss"]] for k, v in
             sorted(sd.benchmarks.items(), key=lambda kv: -kv[1]["s"])]
-    return (f"<p>Measured by Snakemake's <code>benchmark:</code> directive. Sum of job wall times: "
-            f"<b>{total:.1f} s</b> (jobs may overlap on several cores).</p>"
+    shared = " The stability suite runs once for every scene: listed, not summed." if "stability" in sd.benchmarks \
+        else ""
+    return (f"<p>Measured by Snakemake's <code>benchmark:</code> directive. Sum of this scene's job wall times: "
+            f"<b>{total:.1f} s</b> (jobs may overlap on several cores).{shared}</p>"
             + bar_chart_svg(items) + table(["job", "wall s", "cpu s", "max RSS MiB"], rows))
 
 
@@ -476,14 +484,22 @@ def section_relevancy(sd: SceneData) -> str:
         folder = m.eval_dir / "grounding"
         for q in g.get("queries", []):
             query = q.get("query", "")
-            qslug = re.sub(r"[^A-Za-z0-9_-]+", "-", query).strip("-")
             for source in g.get("sources", ["probs"]):
-                files = sorted(folder.glob(f"{source}_{qslug}_*.png"))
-                iou = ((q.get(source) or {}).get("iou") or {}).get("mean")
-                for f in files[:1]:
-                    figures.append(f'<figure>{_img(file_data_uri(f), f"{query} {source}")}'
-                                   f'<figcaption>"{escape(query)}" ({escape(source)})<br>IoU {fmt(iou, 2)}'
-                                   f'</figcaption></figure>')
+                result = q.get(source) or {}
+                frames, per_view = result.get("frames") or [], result.get("per_view") or []
+                if not frames:
+                    continue
+                # the evaluation saves the map of the query's first view
+                f = folder / grounding_figure(source, query, frames[0])
+                if not f.is_file():
+                    figures.append(missing(f"{query} ({source}): {f.name} not found"))
+                    continue
+                mean = (result.get("iou") or {}).get("mean")
+                view = per_view[0] if per_view else None
+                figures.append(f'<figure>{_img(file_data_uri(f), f"{query} {source}")}'
+                               f'<figcaption>"{escape(query)}" ({escape(source)})<br>view {escape(str(frames[0]))}: '
+                               f'IoU {fmt(view, 2)} (mean over {len(per_view)} views {fmt(mean, 2)})'
+                               f'</figcaption></figure>')
         mious = ", ".join(f"mIoU {src} {fmt(g.get(f'miou_{src}'), 3)}" for src in g.get("sources", []))
         blocks.append(f"<h3>{escape(m.name)}</h3><p>threshold {fmt(g.get('threshold'), 2)}; {mious}</p>"
                       + "".join(figures))
@@ -542,8 +558,8 @@ def section_unseen(sd: SceneData) -> str:
     none = ""
     if all(r[4] == 0 for r in rows):  # e.g. one object: every state it takes is a training state
         none = ("<p>No candidate state vector is unseen: the training frames already show each of them (or one "
-                "close to it), so this room has nothing to test here (a single object, or objects that only ever "
-                "move together; or no movable object at all).</p>")
+                "close to it), so this room has nothing to test here (as with a single object, objects that only "
+                "ever move together, a capture dense in states, or no movable object at all).</p>")
     return ("<p>Held-out poses rendered at state combinations the training never showed, against the truth "
             "renderer; 'moved' = only the pixels of the objects that moved.</p>" + none
             + _cut_note(sd, "unseen_combinations", "max_renders") + _unobserved_note(sd)
@@ -655,7 +671,7 @@ def scene_summary(sd: SceneData, page: str) -> dict:
                         for m in sd.methods},
             "verdict": [r.to_dict() for r in scene_verdict(sd, flags)],
             "skipped": [k for k, v in sd.plan.items() if not v.get("needed")],
-            "job_seconds": round(sum(v["s"] for v in sd.benchmarks.values() if math.isfinite(v["s"])), 1)}
+            "job_seconds": round(_scene_seconds(sd), 1)}
 
 
 def build_scene_page(sd: SceneData, *, views: int = 3, index: str | None = None) -> str:

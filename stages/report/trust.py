@@ -96,6 +96,8 @@ def assess_run(method: str, run: dict | None, config: dict | None, metrics: dict
             undertrained.append("run.json records no step count")
         elif steps < floors["min_steps"]:
             undertrained.append(f"{int(steps):,} steps < trust.min_steps {int(floors['min_steps']):,}")
+    if metrics is None:  # no floor on what it measured was checked: not a pass
+        untrusted.append("no metrics.json: the run was not evaluated")
     held = ((metrics or {}).get("held_out") or {}).get("psnr") or {}
     psnr = _number(held.get("mean"))
     if psnr is not None and psnr < floors["min_psnr"]:

@@ -114,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     require_viser()
     viewer = build_viewer(args)
-    print(f"livescene view: {viewer.url}  ({len(viewer.objects)} objects: {', '.join(viewer.objects)}; "
+    n = len(viewer.objects)
+    print(f"livescene view: {viewer.url}  ({n} object{'' if n == 1 else 's'}: {', '.join(viewer.objects)}; "
           f"full resolution {viewer.options.full_pixels} pixels; Ctrl-C stops)", flush=True)
     try:
         deadline = time.monotonic() + args.stop_after if args.stop_after > 0 else None

@@ -295,3 +295,29 @@ def test_a_gpu_run_shows_the_memory_its_allocator_reserved(tmp_path, tiny_datase
     html = render(tmp_path, fake_inputs(results, tiny_dataset.root)).read_text()
     methods = html.split('<section id="methods">')[1].split("</section>")[0]
     assert "4052" in methods and "713" not in methods
+
+
+def test_relevancy_maps_of_names_in_any_script_and_the_view_they_show(tmp_path, tiny_dataset):
+    objects = ("Küchenschublade", "冷蔵庫", "object2")
+    res = make_fake_results(tmp_path, tiny_dataset.root, objects=objects)
+    html = render(tmp_path, fake_inputs(res, tiny_dataset.root)).read_text()
+    relevancy = html.split('<section id="relevancy">')[1].split("</section>")[0]
+    for name in objects:  # each map found by the name the evaluation gave its file
+        assert f'"{name}" (probs)<br>view ' in relevancy
+    metrics = json.loads((res / "eval" / "livescene" / "metrics.json").read_text())
+    q = metrics["grounding"]["queries"][0]["probs"]
+    # the caption gives the shown view's IoU, and the mean over the views apart
+    assert (f"view {q['frames'][0]}: IoU {q['per_view'][0]:.2f} (mean over {len(q['per_view'])} views "
+            f"{q['iou']['mean']:.2f})") in relevancy
+
+
+def test_timings_list_the_jobs_of_the_plan_only(tmp_path, tiny_dataset):
+    res = make_fake_results(tmp_path, tiny_dataset.root)
+    for stale in ("train_mk-planes", "report"):  # a method dropped from the row; the page's own earlier build
+        shutil.copy(res / "benchmarks" / "capture.tsv", res / "benchmarks" / f"{stale}.tsv")
+    html = render(tmp_path, fake_inputs(res, tiny_dataset.root)).read_text()
+    timings = html.split('<section id="timings">')[1].split("</section>")[0]
+    assert "train_livescene" in timings and "train_mk-planes" not in timings and ">report<" not in timings
+    planned = 3.1 + 12.5 + 150.2 + 151.0  # evaluate_livescene is not in this page's plan either
+    assert f"<b>{planned:.1f} s</b>" in timings
+    assert json.loads((tmp_path / "summary.json").read_text())["job_seconds"] == round(planned, 1)

@@ -77,7 +77,10 @@ def test_matrix_has_a_row_per_scene_and_baseline_and_a_tally():
     assert "alone" not in matrix  # no verdict, no row
     # mk-planes' held-out PSNR: office ahead, pantry behind
     assert "<td>mk-planes</td><td>held-out PSNR per view</td><td class=\"num\">2</td><td class=\"num\">1</td>" \
-           "<td class=\"num\">0</td><td class=\"num\">1</td>" in tally
+           "<td class=\"num\">0</td><td class=\"num\">1</td><td class=\"num\">0</td>" in tally
+    # conerf's only verdict rests on a flagged run: it is not a result, so it is counted apart, not as ahead
+    assert "<td>conerf</td><td>held-out PSNR per view</td><td class=\"num\">1</td><td class=\"num\">0</td>" \
+           "<td class=\"num\">0</td><td class=\"num\">0</td><td class=\"num\">1</td>" in tally
 
 
 def test_no_verdict_anywhere_says_why():

@@ -290,3 +290,8 @@ def test_the_nominal_exposure_row_appears_only_for_runs_that_measured_their_gain
             view["psnr_nominal"] = value
     row = next(r for r in compare(measured, {}) if r.metric == "held_out_psnr_nominal")
     assert row.n == 2 and row.mean == pytest.approx(1.0) and "nominal exposure" in row.label
+
+
+def test_a_run_without_an_evaluation_is_not_shown_as_passing_its_floors():
+    flag = assess_run("mk-planes", {"status": "completed", "steps": 5000}, {"trust": {"min_steps": 100}}, None)
+    assert flag.flagged and "not evaluated" in " ".join(flag.reasons)
