@@ -369,11 +369,21 @@ class Evaluator:
         if truth_masks is None:
             return {"status": "skipped: the dataset has no masks and no truth capture was given"}
         queries = []
-        for i, entry in enumerate(self.grounder.vocabulary.entries):
+        vocabulary = self.grounder.vocabulary.entries
+        owners: dict[str, set[str]] = {}
+        for entry in vocabulary:
+            for alias in entry.aliases:
+                owners.setdefault(alias.casefold(), set()).add(entry.name)
+        ambiguous: set[str] = set()
+        for i, entry in enumerate(vocabulary):
             aliases = entry.aliases
             queries.append({"query": aliases[0], "object": entry.name, "index": i, "kind": "name"})
-            if len(aliases) > 1:
-                queries.append({"query": aliases[1], "object": entry.name, "index": i, "kind": "synonym"})
+            # a synonym two objects share ("cupboard" for both cupboards) names neither: its map cannot match one
+            # object's mask, so the first synonym of this object alone is scored
+            synonyms = [a for a in aliases[1:] if len(owners[a.casefold()]) == 1]
+            ambiguous |= {a for a in aliases[1:] if len(owners[a.casefold()]) > 1}
+            if synonyms:
+                queries.append({"query": synonyms[0], "object": entry.name, "index": i, "kind": "synonym"})
         sources = ["probs"]
         language_note = "the run renders no language embedding"
         if rendered and "language" in rendered[0][1]:
@@ -386,6 +396,8 @@ class Evaluator:
                                  f"queries use {self.grounder.encoder.name!r}")
         results: dict[str, Any] = {"status": "computed", "threshold": self.config.grounding_threshold,
                                    "sources": sources, "language_source": language_note, "queries": []}
+        if ambiguous:  # recorded only where there are any: metrics.json of other rooms keep their bytes
+            results["ambiguous_synonyms"] = sorted(ambiguous)
         entries: list[dict[str, Any]] = []
         for q in queries:
             weights = self.grounder.object_weights(q["query"])

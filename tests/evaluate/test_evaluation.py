@@ -102,6 +102,19 @@ def test_wrong_object_scores_zero_iou(eval_scene, tmp_path):
     assert not (tmp_path / "e" / "renders").exists()
 
 
+def test_a_synonym_two_objects_share_is_not_scored_as_one_of_them(eval_scene, tmp_path):
+    """"cupboard" for two cupboards names neither: scored against one object's mask it read IoU 0 by construction
+    (and pulled the room's grounding down); each object's first synonym of its own is scored instead."""
+    ds, run, _ = eval_scene
+    vocab = ObjectVocabulary.from_prompts(ds.objects, {"fridge": {"synonyms": ["appliance", "refrigerator"]},
+                                                       "drawer": {"synonyms": ["appliance"]}})
+    grounder = Grounder(vocab, BagOfWordsEncoder())
+    metrics = evaluate_run(run, ds, tmp_path / "e", None, grounder, EvaluateConfig(save_renders=False))
+    queries = {q["query"]: q["object"] for q in metrics["grounding"]["queries"]}
+    assert queries == {"fridge": "fridge", "refrigerator": "fridge", "drawer": "drawer"}
+    assert metrics["grounding"]["ambiguous_synonyms"] == ["appliance"]
+
+
 def test_run_with_other_objects_is_refused(eval_scene, tmp_path):
     ds, run, _ = eval_scene
     run.objects = ["drawer", "fridge"]

@@ -140,6 +140,9 @@ def test_fields_compile_without_graph_breaks(tiny_dataset, method):
     for module, args in calls:
         explained = torch._dynamo.explain(module)(*args)
         assert explained.graph_break_count == 0, (type(module).__name__, explained.break_reasons)
+        with torch.no_grad():  # the no-grad calls of a step and of the evaluation (the CPU's bag-of-rows path)
+            explained = torch._dynamo.explain(module)(*args)
+        assert explained.graph_break_count == 0, (type(module).__name__, "no grad", explained.break_reasons)
     compile_fields(model)  # in place: the state_dict keeps its keys
     assert all(not k.startswith("_orig_mod") and "._orig_mod" not in k for k in model.state_dict())
 

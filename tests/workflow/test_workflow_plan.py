@@ -123,6 +123,15 @@ def test_a_preset_that_names_no_file_and_a_method_given_twice_are_refused(workfl
     assert run.code != 0 and "key 'methods'" in run.output
 
 
+def test_a_nested_number_given_on_the_command_line_is_read_as_a_number(workflow_copy):
+    """Snakemake reads `--config train='{steps: 61}'` with YAML's base loader: '61' was refused as a string."""
+    jobs = workflow_copy.dry_run("--config", "train={steps: 61}").scene_jobs("demo")
+    assert all("--max-steps 61" in t for t in jobs["train"])
+    run = workflow_copy.snakemake("-n", "--cores", "1", "--config", "train={steps: many}")
+    assert run.code != 0 and "key 'train.steps': 'many' is not of type 'integer'" in run.output
+    assert "--config" in run.output.split("invalid workflow config in")[1].splitlines()[0]
+
+
 def test_missing_masks_policy_reaches_the_labels_stage_and_is_checked(workflow_copy):
     leave = workflow_copy.write_config(labels={"missing_masks": "leave"})
     jobs = workflow_copy.dry_run("--configfile", str(leave)).scene_jobs("demo")

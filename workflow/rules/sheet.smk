@@ -25,9 +25,34 @@ def _schema_problem(error):
     return f"key {where!r}: {error.message}" + (f" (expected {expected})" if expected else "")
 
 
+SCALAR_TYPES = {"integer": int, "number": (int, float), "boolean": bool}
+
+
+def _from_command_line(cfg, schema):
+    """Typed values for the scalars that `--config` gave as text: Snakemake reads a nested value
+    (`--config train='{steps: 3000}'`) with YAML's base loader, so 3000 arrives as '3000'. Only values of
+    the command line are read again; a config file's quoted number stays an error."""
+    given = workflow.config_settings.overwrite_config or {}
+    for error in list(jsonschema.Draft202012Validator(schema).iter_errors(cfg)):
+        path = list(error.absolute_path)
+        wanted = SCALAR_TYPES.get(error.validator_value) if error.validator == "type" else None
+        node = given
+        for key in path:
+            node = node.get(key) if isinstance(node, dict) else None
+        if wanted is None or not isinstance(error.instance, str) or node != error.instance:
+            continue
+        value = yaml.safe_load(error.instance)
+        if isinstance(value, wanted) and not (wanted is not bool and isinstance(value, bool)):
+            target = cfg
+            for key in path[:-1]:
+                target = target[key]
+            target[path[-1]] = value
+
+
 def _check_config(cfg):
     """Validate the merged config and fill its defaults; an error names the config file(s), every bad key and
     the expected type (snakemake's own message stops at the first)."""
+    _from_command_line(cfg, yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text()))
     try:
         validate(cfg, schema=str(SCHEMAS / "config.schema.yaml"), set_default=True)
     except WorkflowError:
@@ -38,6 +63,8 @@ def _check_config(cfg):
     schema = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())
     errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(cfg), key=lambda e: list(e.absolute_path))
     files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
+    if workflow.config_settings.overwrite_config:
+        files.append("--config")
     lines = "\n".join(f"  - {_schema_problem(e)}" for e in errors)
     raise WorkflowError(f"invalid workflow config in {', '.join(files)}:\n{lines}\n"
                         f"fix: correct these keys (schema: {SCHEMAS / 'config.schema.yaml'})")
