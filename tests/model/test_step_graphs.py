@@ -167,7 +167,17 @@ def test_a_checkpoint_of_a_graph_run_resumes_eagerly_as_if_uninterrupted(tiny_da
         return tiny_config(tiny_dataset.root, "train.checkpoint_every=3", steps=steps)
 
     Trainer(config(6), tmp_path / "straight", device="cpu", progress=False).train()
-    Trainer(config(3), tmp_path / "resumed", device="cpu", progress=False).train()
+    stopped = Trainer(config(6), tmp_path / "resumed", device="cpu", progress=False)
+    original = stopped.train_step
+
+    def step_then_stop():
+        result = original()
+        if stopped.step == 2:  # stopped after its third step (max_steps is part of the run: the same 6)
+            stopped.request_stop("sigterm")
+        return result
+
+    stopped.train_step = step_then_stop
+    stopped.train()
     path = tmp_path / "resumed" / "checkpoints" / "step_000003.pt"
     state = torch.load(path, weights_only=False)
     for group in state["optimizer"]["param_groups"]:  # as a graph run writes them

@@ -349,7 +349,9 @@ def test_state_ranges_reach_the_states_stage_and_are_checked(workflow_copy, tmp_
                                 {"scene": "typo", "state_ranges": "wardrobe=0-95", **row}])
     run = workflow_copy.snakemake("-n", "--cores", "1")
     assert run.code != 0
-    assert "line 2 (scene 'ready'): column 'state_ranges': only key frames that the states stage" in run.output
+    # a ready dataset's key frames are normalised by the trainer: its fixed ranges go in its scene.json
+    assert "line 2 (scene 'ready'): column 'state_ranges': a ready dataset's key frames are normalised by the " \
+        "trainer" in run.output and "scene.json" in run.output
     assert "line 3 (scene 'typo'): key 'state_ranges'" in run.output
 
 
