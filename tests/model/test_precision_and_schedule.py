@@ -48,7 +48,10 @@ def test_lr_warmup_cosine_and_time_budget():
     # half the wall-clock budget spent early in the step budget: the decay is half way
     assert lr_factor(20, 10, 1000, 0.0, time_fraction=0.5) == pytest.approx(0.5)
     assert lr_factor(20, 10, 1000, 0.0, time_fraction=1.0) == pytest.approx(0.0, abs=1e-12)
-    assert lr_factor(5, 10, 1000, 0.0, time_fraction=0.9) == pytest.approx(0.6)  # warm-up is by step
+    assert lr_factor(5, 10, 1000, 0.0, time_fraction=0.1) == pytest.approx(0.6)  # warm-up is by step
+    # a budget shorter than the warm-up: the run still ends at a low rate, not at the warm-up's
+    assert lr_factor(5, 10, 1000, 0.0, time_fraction=0.9) == pytest.approx(0.5 * (1 + math.cos(0.9 * math.pi)))
+    assert lr_factor(5, 10, 1000, 0.0, time_fraction=1.0) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_learned_state_rays_carry_no_states_and_eval_uses_the_state_field(tiny_dataset, tmp_path, tiny_config):

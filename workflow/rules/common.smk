@@ -150,8 +150,8 @@ def train_args(wildcards):
     # Without key frames a scene has no per-frame states to give: LiveScene learns them.
     if not carries(wildcards.scene, "key_frames"):
         args.append("--state-mode learned")
-    if config["train"]["appearance"] != "none":  # the model's default: the reference
-        args.append(f"--set model.appearance.mode={config['train']['appearance']}")
+    # always named: a preset file of the user's that sets model.appearance.mode must not win over the workflow key
+    args.append(f"--set model.appearance.mode={config['train']['appearance']}")
     if "exposure" in files:  # measured once per scene (rule exposure), not once per method
         args.append(f"--exposure {q(files['exposure'])}")
     return " ".join(args)
