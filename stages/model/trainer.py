@@ -164,6 +164,8 @@ def lr_factor(step: int, warmup: int, total: int, final_ratio: float, time_fract
     time budget on a slow machine still ends at a low learning rate.
     """
     if warmup > 0 and step < warmup:
+        if time_fraction <= 0.0:  # no budget: the warm-up alone (the same floats as ever)
+            return (step + 1) / warmup
         # a budget spent within the warm-up still decays the rate (the budget's share alone drives it there)
         by_time = final_ratio + (1.0 - final_ratio) * 0.5 * (1.0 + math.cos(math.pi * min(time_fraction, 1.0)))
         return min((step + 1) / warmup, by_time)
