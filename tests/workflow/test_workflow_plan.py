@@ -123,6 +123,16 @@ def test_a_preset_that_names_no_file_and_a_method_given_twice_are_refused(workfl
     assert run.code != 0 and "key 'methods'" in run.output
 
 
+def test_frame_limits_a_capture_does_not_reach_are_not_named(workflow_copy):
+    """The demo (80 frames of 256x192) is within frames.count and .max_side: its command names neither, so changing
+    a limit it does not reach reruns nothing; a limit that bites is named."""
+    frames = workflow_copy.dry_run().scene_jobs("demo")["frames"][0]
+    assert "--count" not in frames and "--max-side" not in frames
+    tight = workflow_copy.write_config(frames={"count": 40, "max_side": 128})
+    frames = workflow_copy.dry_run("--configfile", str(tight)).scene_jobs("demo")["frames"][0]
+    assert "--count 40 --max-side 128" in frames
+
+
 def test_a_nested_number_given_on_the_command_line_is_read_as_a_number(workflow_copy):
     """Snakemake reads `--config train='{steps: 61}'` with YAML's base loader: '61' was refused as a string."""
     jobs = workflow_copy.dry_run("--config", "train={steps: 61}").scene_jobs("demo")

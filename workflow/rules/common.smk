@@ -75,11 +75,20 @@ def frames_input(wildcards):
 
 
 def frames_selection(wildcards):
-    """--count / --max-side of config frames, and the scene's mask folder whose frames are kept first."""
+    """--count / --max-side of config frames, and the scene's mask folder whose frames are kept first. A synthetic
+    capture within both limits passes unchanged, so neither is named: changing a limit it does not reach reruns
+    nothing (it had rerun COLMAP and every training for the same frames)."""
     c = config["frames"]
-    args = [f" --count {c['count']}"] if c["count"] else []
-    args += [f" --max-side {c['max_side']}"] if c["max_side"] else []
+    count, max_side = c["count"], c["max_side"]
     scene = wildcards.scene
+    if source(scene) == "synthetic":
+        from stages.capture.spec import load_spec
+
+        video = load_spec(row(scene)["path"]).video
+        count = count if count and count < video.n_frames else 0
+        max_side = max_side if max_side and max_side < max(video.width, video.height) else 0
+    args = [f" --count {count}"] if count else []
+    args += [f" --max-side {max_side}"] if max_side else []
     if source(scene) != "synthetic" and carries(scene, "masks"):  # a mask folder or file: its frames kept first
         args.append(f" --prefer-masked {shlex.quote(row(scene)['masks'])}")
     return "".join(args)
