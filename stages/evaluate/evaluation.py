@@ -164,7 +164,17 @@ class Evaluator:
         """The run's render of ``frame``'s view; ``rgb_only`` takes the model's fast path (no probs, no language)."""
         extra = {"outputs": ("rgb",)} if rgb_only else {}
         return self.run.render(self._camera(frame), np.asarray(frame.c2w, float), states,
-                               frame_index=self.ds.frames.index(frame), **extra)
+                               frame_index=self._run_index(frame), **extra)
+
+    def _run_index(self, frame: Frame) -> int | None:
+        """The run's index of ``frame``, by id (a dataset given in another order names the same frames)."""
+        index_of = getattr(self.run, "frame_index_of", None)
+        index = index_of(frame, self.ds.frames) if index_of else self.ds.frames.index(frame)
+        if index is None and getattr(self.run, "state_mode", "given") == "learned":
+            raise InputError(self.ds.root / "transforms.json", f"frame {frame.frame_id} is not a frame the run was "
+                             "trained on, so it has no learned state",
+                             "evaluate with the dataset the run was trained on")
+        return index
 
     def _image(self, frame: Frame) -> np.ndarray:
         """The dataset image at the render scale (area averaging, as a camera with larger pixels would see)."""
@@ -268,9 +278,26 @@ class Evaluator:
         return out
 
     # -- 2. unseen state combinations -----------------------------------------------------------------------
+    def _other_scale(self) -> str | None:
+        """Why the truth's states and the run's are not on one scale, or None: key values the trainer rescaled
+        (a published-form dataset's units, docs/data-contract.md "Key frames and the time axis") are not the
+        truth renderer's [0, 1]."""
+        if any(f.state for f in self.ds.frames) or not self.ds.key_frames:
+            return None
+        from stages.scene.key_frame_states import key_frame_states
+
+        rescaled = key_frame_states(self.ds).rescaled
+        if not rescaled:
+            return None
+        shown = ", ".join(f"{o} {r['lo']:g}..{r['hi']:g}" for o, r in rescaled.items())
+        return (f"skipped: the dataset's key values were mapped to [0, 1] ({shown}), so the truth capture's states "
+                "and the run's are not on one scale")
+
     def unseen(self, out_dir: Path | None) -> dict[str, Any]:
         if self.truth is None:
             return {"status": "skipped: no truth capture given (--truth)"}
+        if (why := self._other_scale()) is not None:
+            return {"status": why}
         cfg = self.config
         objects = self.ds.objects
         train_states = self.ds.state_matrix(self.ds.frames_in("train"))
@@ -280,6 +307,7 @@ class Evaluator:
         n_views = _within(cfg.unseen_views, sum(c.unseen for c in combos), cfg.max_unseen_renders)
         views = _evenly(self.ds.frames_in("test"), n_views)
         records, seen = [], []
+        unknown_state: list[str] = []
         saved = model_renders = 0
         render_seconds = 0.0
         pose_sources = set()
@@ -289,6 +317,8 @@ class Evaluator:
             t_c2w, how = self.truth.pose_for(frame)
             pose_sources.add(how)
             own_state = self.truth.state_for(frame) or {}
+            if not own_state:  # every object then counts as moved, and the view has no seen reference
+                unknown_state.append(frame.frame_id)
             own_ids = None
             if own_state:
                 # the same view at its own (seen) state: the reference the unseen scores are read against
@@ -337,7 +367,11 @@ class Evaluator:
                     saved += 1
         unseen = [r for r in records if r["unseen"]]
         self.timings["unseen_combinations"] = {"model_render_seconds": render_seconds, "model_renders": model_renders}
-        return {
+        note = {} if not unknown_state else {  # recorded only where it happens: other rooms keep their bytes
+            "views_without_truth_state": unknown_state,
+            "note": f"the truth's state of {len(unknown_state)} view(s) is unknown (their frames carry no "
+                    "source_index): every object counts as moved there, and they have no seen reference"}
+        return note | {
             "status": "computed",
             "truth": self.truth.origin,
             "truth_pose_source": sorted(pose_sources),
@@ -467,6 +501,8 @@ class Evaluator:
     def locality(self) -> dict[str, Any]:
         if self.truth is None:
             return {"status": "skipped: no truth capture given (--truth)"}
+        if (why := self._other_scale()) is not None:
+            return {"status": why}
         cfg = self.config
         n_views = _within(cfg.locality_views, len(self.ds.objects), cfg.max_locality_pairs)
         frames = _evenly(self.ds.frames_in("test"), n_views)

@@ -137,7 +137,7 @@ def _relevancy(args: argparse.Namespace) -> int:
     frame = ds.frame_by_id(args.frame) if args.frame else frames[0]
     grounder = Grounder(ObjectVocabulary.from_prompts(ds.objects, ds.prompts, Path(data) / "prompts.yaml"),
                         encoder_from_args(args))
-    out = run.render(ds.camera_of(frame), frame.c2w, frame.state, frame_index=ds.frames.index(frame))
+    out = run.render(ds.camera_of(frame), frame.c2w, frame.state, frame_index=run.frame_index_of(frame, ds.frames))
     if args.source in ("language", "language_objects"):
         if "language" not in out:
             raise InputError(args.run, "this run renders no language embedding",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -182,8 +183,11 @@ def main(argv: list[str] | None = None) -> int:
         ds = read_scene(root)
         frame = ds.frame_by_id(fid)
         camera, c2w = ds.camera_of(frame), frame.c2w
-        if [f.frame_id for f in ds.frames] == run.frame_ids:
-            frame_index = ds.frames.index(frame)
+        frame_index = run.frame_index_of(frame, ds.frames) if run.frame_ids else None
+        if frame_index is None and run.state_mode == "learned":
+            print(f"warning: frame {fid} is not a frame of the run's dataset, which alone has learned states: objects "
+                  "not given by --state render at 0; fix: give every object's --state, or a pose of the run's "
+                  "dataset", file=sys.stderr)
     else:
         c2w = _parse_matrix(args.pose_matrix)
         camera = read_scene(dataset_of_run(args.run, args.data), validate=False).camera

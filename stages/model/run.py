@@ -91,6 +91,17 @@ class LoadedRun:
         path = self.run_dir / EXPOSURE_FILE
         return json.loads(path.read_text())["log_gains"] if path.is_file() else None
 
+    def frame_index_of(self, frame: Any, ds_frames: Sequence[Any]) -> int | None:
+        """The run's own index of a dataset frame (its learned state, time and colour correction), by frame id: a
+        dataset given in another order, or a copy of it, names the same frames. None when the run does not know
+        the frame; a run saved before frame ids were recorded takes the frame's position in ``ds_frames``."""
+        if not self.frame_ids:
+            return list(ds_frames).index(frame)
+        try:
+            return self.frame_ids.index(frame.frame_id)
+        except ValueError:
+            return None
+
     def frame_time(self, frame_index: int) -> float:
         n = self.info.n_frames
         if not 0 <= frame_index < n:

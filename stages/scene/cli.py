@@ -48,8 +48,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"note: transforms.json names no split: {ds.split_note}; {len(ds.frames_in('test'))} of "
                   f"{len(ds.frames)} frames held out")
         for name, r in key_frame_states(ds).rescaled.items():
+            fixed = r["source"] == "scene.json state_ranges"
+            hint = "" if fixed else "; a fixed range goes in scene.json \"state_ranges\""
             print(f"note: {ds.root / 'key_frame_value.yaml'}: {name!r} key values {r['lo']:g}..{r['hi']:g} are "
-                  f"mapped to [0, 1] ({r['source']}; a fixed range goes in scene.json \"state_ranges\")")
+                  f"mapped to [0, 1] ({r['source']}{hint})")
         if ds.objects and not ds.has_masks:  # valid, but not for every method: say which
             print(f"warning: {ds.root / 'mapping.yaml'}: names objects {ds.objects} but the dataset has no masks/: "
                   "LiveScene and CoNeRF-style refuse it (only masks train their probability field) and no grounding "

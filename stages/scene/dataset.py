@@ -173,14 +173,22 @@ class SceneDataset:
         return [f for f in self.frames if (f.split or "train") == split]
 
     def state_matrix(self, frames: list[Frame] | None = None) -> np.ndarray:
-        """``[n_frames, n_objects]`` states; NaN where a frame carries none."""
+        """``[n_frames, n_objects]`` states; NaN where a frame carries none. Where no frame of the dataset carries
+        states (the published form: states only at key frames), a key frame's state, normalised as the trainer
+        normalises it (``key_frame_states``), is its frame's: what a learned run was told at that frame."""
         frames = self.frames if frames is None else frames
         out = np.full((len(frames), self.n_objects), np.nan, dtype=np.float64)
+        keyed: dict[str, dict[str, float]] = {}
+        if self.key_frames and not any(f.state for f in self.frames):
+            from .key_frame_states import key_frame_states
+
+            keyed = {self.frames[i].frame_id: v for i, v in key_frame_states(self).by_frame.items()}
         for i, f in enumerate(frames):
-            if f.state:
+            state = f.state or keyed.get(f.frame_id)
+            if state:
                 for j, name in enumerate(self.objects):
-                    if name in f.state:
-                        out[i, j] = f.state[name]
+                    if name in state:
+                        out[i, j] = state[name]
         return out
 
     def state_ranges(self, frames: list[Frame] | None = None) -> dict[str, list[float] | None]:
@@ -461,9 +469,9 @@ def _check_key_frames(ds: SceneDataset) -> None:
         unposed = [fid for fid in unmatched if frame_number_of(fid) in numbers - {None}]
         missing = [fid for fid in unmatched if fid not in unposed]
         if missing:
-            raise SceneError(kpath, f"key frame {missing[0]!r} matches no frame of transforms.json nor any image "
-                             f"of {images}", "key frames must name an image by its frame id (the last '_' token "
-                             "of its name) or its number")
+            raise SceneError(kpath, f"the key frame of frame id {missing[0]!r} matches no frame of transforms.json "
+                             f"nor any image of {images}", "key frames must name an image by its frame id (the last "
+                             "'_' token of its name) or its number")
         warnings.warn(f"{kpath}: key frame(s) {unposed[:5]} name images that transforms.json has no pose for; they "
                       "are not used; fix: pose those frames, or drop them from the file to silence this",
                       stacklevel=3)

@@ -87,7 +87,7 @@ def test_a_key_frame_on_an_unposed_image_is_left_out_and_a_typo_refused(tmp_path
     assert 3 not in {int(ds.frames[i].frame_id) for i in key_frame_states(ds).by_frame}
     keys = yaml.safe_load((root / "key_frame_value.yaml").read_text())
     (root / "key_frame_value.yaml").write_text(yaml.safe_dump(keys | {"frame_00099": {"object0": 1.0}}))
-    with warnings.catch_warnings(), pytest.raises(SceneError, match="'00099' matches no frame"):
+    with warnings.catch_warnings(), pytest.raises(SceneError, match="frame id '00099' matches no frame"):
         warnings.simplefilter("ignore")
         read_scene(root)
 
@@ -111,3 +111,23 @@ def test_conerf_latents_are_looked_up_by_the_frames_times():
     assert states.frame_index(torch.tensor([0.0, 0.26, 0.31, 0.99])).tolist() == [0, 1, 2, 3]
     assert "times" not in states.state_dict()  # the run's SceneInfo holds them
 
+
+
+def test_a_key_frame_only_dataset_gives_its_training_states_at_the_key_frames(tmp_path):
+    """What a learned run was told: the unseen test's seen states, control's and the sliders' training ranges."""
+    ds = read_scene(published(tmp_path / "ds"))
+    matrix = ds.state_matrix()
+    keyed = {ds.frames[i].frame_id for i in key_frame_states(ds).by_frame}
+    rows = {f.frame_id: row for f, row in zip(ds.frames, matrix, strict=True)}
+    assert all(np.isfinite(rows[fid]).all() for fid in keyed)
+    assert all(np.isnan(row).all() for fid, row in rows.items() if fid not in keyed)
+    assert ds.state_ranges(ds.frames) == {"object0": [0.0, 1.0], "object1": [0.0, 1.0]}  # normalised, not units
+
+
+def test_the_truth_is_not_compared_with_a_run_on_rescaled_key_values(tmp_path):
+    from stages.evaluate.evaluation import Evaluator
+
+    rescaled = Evaluator(object(), read_scene(published(tmp_path / "units")))
+    assert rescaled._other_scale().startswith("skipped: the dataset's key values were mapped to [0, 1]")
+    keys = {"frame_00000": {"object0": 0.0, "object1": 0.0}, "frame_00006": {"object0": 1.0, "object1": 1.0}}
+    assert Evaluator(object(), read_scene(published(tmp_path / "unit", keys=keys)))._other_scale() is None
