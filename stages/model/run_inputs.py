@@ -18,8 +18,8 @@ import torch
 
 EXECUTION_ONLY: dict[str, frozenset[str] | None] = {
     # None: the whole section; a set: those keys of it
-    "train": frozenset({"eval_every", "eval_rays", "checkpoint_every", "keep_checkpoints", "log_every",
-                        "max_nonfinite", "render_chunk", "compile", "compile_mode", "cuda_graphs"}),
+    "train": frozenset({"eval_rays", "checkpoint_every", "keep_checkpoints", "log_every", "max_nonfinite",
+                        "render_chunk", "compile", "compile_mode", "cuda_graphs"}),
     "trust": None,
     "data": None,
     "language_targets": None,
@@ -28,7 +28,9 @@ EXECUTION_ONLY: dict[str, frozenset[str] | None] = {
 }
 """Config entries a resumed run may change: how it runs, where the inputs live (their contents are in the data
 digest), and the report's floors. Everything else defines what is learned, ``max_steps`` and ``max_seconds`` too
-(the learning rate decays over them) and ``threads`` (the order of torch's float sums)."""
+(the learning rate decays over them) and ``threads`` (the order of torch's float sums); ``eval_every`` defines the
+run's log (train_log.csv's points, the report's error curves), so a change trains again rather than posing the old
+log as the new setting's."""
 
 
 def _learned_part(config: dict[str, Any]) -> dict[str, Any]:
@@ -41,12 +43,13 @@ def _learned_part(config: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+def flatten_config(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested config sections -> ``{"train.max_steps": 1500, ...}``."""
     flat: dict[str, Any] = {}
     for key, value in d.items():
         name = f"{prefix}{key}"
         if isinstance(value, dict):
-            flat.update(_flatten(value, name + "."))
+            flat.update(flatten_config(value, name + "."))
         else:
             flat[name] = value
     return flat
@@ -54,7 +57,7 @@ def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def config_differences(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
     """The config keys (dotted) whose learned-run values differ between two ``RunConfig.to_dict()``s."""
-    a, b = _flatten(_learned_part(old)), _flatten(_learned_part(new))
+    a, b = flatten_config(_learned_part(old)), flatten_config(_learned_part(new))
     return sorted(k for k in a.keys() | b.keys() if a.get(k, "<absent>") != b.get(k, "<absent>"))
 
 

@@ -48,7 +48,7 @@ from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
 from .ray_dataset import RayBatch, RayDataset, state_vector
-from .run_inputs import config_differences, data_digest
+from .run_inputs import config_differences, data_digest, flatten_config
 from .scene_normalization import SceneNormalization
 from .step_graphs import GraphCaptureError, StepGraphs
 
@@ -396,7 +396,9 @@ class Trainer:
                            "language targets changed)")
         changed = config_differences(state.get("config", {}), self.config.to_dict())
         if changed:
-            shown = ", ".join(changed[:6]) + (f" and {len(changed) - 6} more" if len(changed) > 6 else "")
+            was, now = flatten_config(state.get("config", {})), flatten_config(self.config.to_dict())
+            shown = ", ".join(f"{k} ({was.get(k, 'absent')!r} there, {now.get(k, 'absent')!r} now)"
+                              for k in changed[:6]) + (f" and {len(changed) - 6} more" if len(changed) > 6 else "")
             reasons.append(f"its config differs in {shown}")
         return "; ".join(reasons)
 
@@ -404,6 +406,7 @@ class Trainer:
         """Remove a stale run's checkpoints and log (model.pt and run.json are rewritten at the end)."""
         for old in sorted((self.out / "checkpoints").glob("step_*.pt")):
             old.unlink()
+        self.finished_record.unlink(missing_ok=True)
         (self.out / "train_log.csv").unlink(missing_ok=True)
         print(f"{self.out}: starting over, the checkpoints there were of another run: {why}", file=sys.stderr)
 
@@ -633,7 +636,7 @@ class Trainer:
         elif (self.out / "checkpoints").is_dir() and any((self.out / "checkpoints").glob("step_*.pt")):
             raise InputError(self.out, "already holds checkpoints of a run",
                              "pass --resume to continue it, or choose a new --out folder")
-        if self.step >= cfg.train.max_steps and (self.out / "run.json").is_file() and (self.out / "model.pt").is_file():
+        if self.step >= cfg.train.max_steps and self.finished_record.is_file() and (self.out / "model.pt").is_file():
             return self._already_finished(cfg)
         write_yaml(self.out / "config.yaml", cfg.to_dict())
         handlers = {}
@@ -648,11 +651,17 @@ class Trainer:
             for sig, handler in handlers.items():
                 signal.signal(sig, handler)
 
+    @property
+    def finished_record(self) -> Path:
+        """run.json's copy beside the checkpoints: a workflow rerun finds run.json itself deleted (Snakemake removes
+        a job's outputs before it runs), and the training's figures must outlive that."""
+        return self.out / "checkpoints" / "run.json"
+
     def _already_finished(self, cfg: RunConfig) -> dict[str, Any]:
         """A finished run resumed with nothing left to train (a rerun after a setting of how it runs changed, such
         as a trust floor): its weights, log and records stay those of the training; config.yaml takes the new trust
         floors, which judge it, and run.json is written again unchanged (a rerun job's output is new)."""
-        run = json.loads((self.out / "run.json").read_text())
+        run = json.loads(self.finished_record.read_text())
         trained = yaml.safe_load((self.out / "config.yaml").read_text()) if (self.out / "config.yaml").is_file() \
             else cfg.to_dict()
         trained["trust"] = cfg.to_dict()["trust"]
@@ -664,11 +673,10 @@ class Trainer:
 
     def _train(self, cfg: RunConfig) -> dict[str, Any]:
         if self.step < cfg.train.max_steps:
-            # a finished run resumed for more steps is unfinished until they are done: run.json (the completion
-            # mark, first) and model.pt go, or an interruption would leave the old weights looking final; the
-            # checkpoint of the old last step stays
-            for name in ("run.json", "model.pt"):
-                (self.out / name).unlink(missing_ok=True)
+            # a run trained again (or a time-budget run resumed) is unfinished until it is done: run.json (the
+            # completion mark, first) and model.pt go, or an interruption would leave old weights looking final
+            for path in (self.out / "run.json", self.finished_record, self.out / "model.pt"):
+                path.unlink(missing_ok=True)
         if self.device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(self.device)
         t0 = self._t0 = time.perf_counter()
@@ -800,5 +808,7 @@ class Trainer:
             run["key_frame_ranges"] = self.key_frame_ranges
         if self.ds.split_note:
             run["split"] = self.ds.split_note
+        if status == "completed":
+            write_json(self.finished_record, run)
         write_json(self.out / "run.json", run)
         return run

@@ -88,18 +88,23 @@ def test_config_change_is_named_and_more_steps_are_another_run(tiny_dataset, tmp
 
 
 def test_a_finished_run_rerun_with_nothing_to_train_keeps_its_records(tiny_dataset, tmp_path, tiny_config):
-    """A workflow rerun after a setting of how a run runs changed (eval_every, a trust floor) trains nothing: its
-    run.json (eval PSNR, peak memory) and model.pt stay the training's; config.yaml takes the new floors."""
+    """A workflow rerun after a setting of how a run runs changed (a trust floor, the render chunk) trains nothing:
+    its run.json (eval PSNR, peak memory) and model.pt stay the training's, even though Snakemake deleted run.json
+    before the job ran; config.yaml takes the new floors. eval_every is the run's log: a change trains again."""
     out = tmp_path / "run"
     _finished(tiny_config(tiny_dataset.root, steps=3), out)
     before = json.loads((out / "run.json").read_text())
     weights = (out / "model.pt").read_bytes()
-    Trainer(tiny_config(tiny_dataset.root, "train.eval_every=1", "trust.min_steps=2", steps=3), out, device="cpu",
-            progress=False, resume=True).train()
+    (out / "run.json").unlink()  # Snakemake removes a job's outputs before it runs
+    Trainer(tiny_config(tiny_dataset.root, "train.render_chunk=777", "trust.min_steps=2", steps=3), out,
+            device="cpu", progress=False, resume=True, restart_stale=True).train()
     assert json.loads((out / "run.json").read_text()) == before and before["eval_psnr"] is not None
     assert (out / "model.pt").read_bytes() == weights
     config = yaml.safe_load((out / "config.yaml").read_text())
-    assert config["trust"]["min_steps"] == 2 and config["train"]["eval_every"] != 1
+    assert config["trust"]["min_steps"] == 2 and config["train"]["render_chunk"] != 777
+    with pytest.raises(InputError, match=r"config differs in train\.eval_every"):
+        Trainer(tiny_config(tiny_dataset.root, "train.eval_every=1", steps=3), out, device="cpu", progress=False,
+                resume=True).train()
 
 
 def test_cli_restart_stale_flag(tiny_dataset, tmp_path, tiny_overrides, capsys):
@@ -119,8 +124,8 @@ def test_digest_and_differences_helpers():
     a = {"x": torch.arange(4, dtype=torch.float32), "y": None}
     assert data_digest(a) == data_digest({"y": None, "x": torch.arange(4, dtype=torch.float32)})
     assert data_digest(a) != data_digest({"x": torch.arange(4, dtype=torch.float64), "y": None})
-    old = {"seed": 0, "data": "a", "train": {"lr": 0.02, "eval_every": 10}, "trust": {"min_psnr": 20.0}}
-    new = {"seed": 1, "data": "b", "train": {"lr": 0.02, "eval_every": 99}, "trust": {"min_psnr": 5.0}}
+    old = {"seed": 0, "data": "a", "train": {"lr": 0.02, "render_chunk": 10}, "trust": {"min_psnr": 20.0}}
+    new = {"seed": 1, "data": "b", "train": {"lr": 0.02, "render_chunk": 99}, "trust": {"min_psnr": 5.0}}
     assert config_differences(old, new) == ["seed"]
     # a checkpoint written before train.compile_mode existed resumes under any mode: how it runs, not what it learns
     new["train"]["compile_mode"] = "reduce-overhead"

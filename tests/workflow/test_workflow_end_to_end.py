@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -93,6 +94,17 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
     assert alone.code == 0, alone.output[-3000:]
     assert "scene=filmed" not in alone.output and "scene=tiny" in alone.output
     assert "results/filmed/report/summary.json" in alone.output  # listed in the index from the earlier run
+
+    # a training killed on its own (a scheduler's SIGTERM) leaves its checkpoint and no run.json: the rerun
+    # trains again (resuming), then evaluates and reports again; it had said "Nothing to be done"
+    killed = results / "runs" / "livescene" / "run.json"
+    kept = shutil.copy2(killed, tmp_path / "run.json")
+    killed.unlink()
+    rerun = wf.snakemake("-n", "--cores", "2", "--configfile", str(config))
+    assert rerun.code == 0 and "Nothing to be done" not in rerun.output, rerun.output[-3000:]
+    jobs = rerun.jobs()
+    assert jobs.get("train") == 1 and jobs.get("evaluate") == 1 and jobs.get("report_scene") == 1, jobs
+    shutil.copy2(kept, killed)  # as it was (time stamp too): the rest of the test reads the finished run
 
     report = wf.snakemake("all", "--cores", "1", "--report", "report.zip", "--configfile", str(config))
     assert report.code == 0, report.output[-3000:]

@@ -206,8 +206,14 @@ def scene_outputs(scene):
 
 
 def all_targets():
-    """Final outputs: the index page (which pulls in every scene page and all it needs) and its verdicts.csv."""
-    return [str(Path(REPORTS, "index.html")), str(Path(REPORTS, "verdicts.csv"))]
+    """Final outputs: the index page (which pulls in every scene page and all it needs) and its verdicts.csv, and
+    every file the selected scenes' pages read: Snakemake remakes a missing intermediate only when a consumer has
+    to run, so a training killed on its own (a scheduler's SIGTERM, SIGKILL) left no run.json and a rerun said
+    "Nothing to be done" over the previous model's pages; named here, a missing one is remade (and what reads it)."""
+    outputs = [str(Path(REPORTS, "index.html")), str(Path(REPORTS, "verdicts.csv"))]
+    for scene in SELECTED:
+        outputs += [str(v) for v in scene_outputs(scene).values() if str(v) not in outputs]
+    return outputs
 
 
 def earlier_summaries(scene=None):
