@@ -736,7 +736,9 @@ class Trainer:
         finally:
             bar.close()
         wall = self.wall_before + time.perf_counter() - t0
-        if status != "completed" and self.log_rows and cfg.train.eval_every > 0:
+        # a run cut by its budget ends with a held-out figure for run.json; one stopped by a signal goes on later,
+        # and an evaluation here would stay in its log as a point an uninterrupted run does not have
+        if status not in ("completed", "sigterm") and self.log_rows and cfg.train.eval_every > 0:
             last_psnr = self.evaluate()
             self.log_rows[-1]["eval_psnr"] = last_psnr
             self.log_rows[-1]["eval_miou"] = self.last_eval_miou

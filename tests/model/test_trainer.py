@@ -20,11 +20,12 @@ def _weights(run_dir):
 
 
 def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_config):
+    config = tiny_config(tiny_dataset.root, "train.eval_every=4", steps=5)  # the stop (step 2) is off the grid
     straight = tmp_path / "straight"
-    Trainer(tiny_config(tiny_dataset.root, steps=5), straight, device="cpu", progress=False).train()
+    Trainer(config, straight, device="cpu", progress=False).train()
 
     interrupted = tmp_path / "interrupted"
-    trainer = Trainer(tiny_config(tiny_dataset.root, steps=5), interrupted, device="cpu", progress=False)
+    trainer = Trainer(config, interrupted, device="cpu", progress=False)
     original = trainer.train_step
 
     def step_then_signal():
@@ -39,16 +40,18 @@ def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_conf
     assert (interrupted / "checkpoints" / "step_000002.pt").is_file()
     assert not (interrupted / "model.pt").exists()
     with pytest.raises(Exception, match="--resume"):
-        Trainer(tiny_config(tiny_dataset.root, steps=5), interrupted, device="cpu", progress=False).train()
+        Trainer(config, interrupted, device="cpu", progress=False).train()
 
-    Trainer(tiny_config(tiny_dataset.root, steps=5), interrupted, device="cpu", progress=False, resume=True).train()
+    Trainer(config, interrupted, device="cpu", progress=False, resume=True).train()
     a, b = _weights(straight), _weights(interrupted)
     assert a.keys() == b.keys()
     for k in a:
         torch.testing.assert_close(a[k], b[k], rtol=0, atol=0, equal_nan=True, msg=k)
     with (interrupted / "train_log.csv").open() as fh:
-        steps = [int(r["step"]) for r in csv.DictReader(fh)]
-    assert steps == [1, 2, 3, 4, 5]
+        rows = list(csv.DictReader(fh))
+    assert [int(r["step"]) for r in rows] == [1, 2, 3, 4, 5]
+    with (straight / "train_log.csv").open() as fh:  # the same held-out points: none at the stop step
+        assert [(r["step"], r["eval_psnr"]) for r in csv.DictReader(fh)] == [(r["step"], r["eval_psnr"]) for r in rows]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP])
