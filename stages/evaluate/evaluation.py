@@ -282,7 +282,7 @@ class Evaluator:
         """Why the truth's states and the run's are not on one scale, or None: key values the trainer rescaled
         (a published-form dataset's units, docs/data-contract.md "Key frames and the time axis") are not the
         truth renderer's [0, 1]."""
-        if any(f.state for f in self.ds.frames) or not self.ds.key_frames:
+        if not self.ds.states_at_key_frames_only:
             return None
         from stages.scene.key_frame_states import key_frame_states
 

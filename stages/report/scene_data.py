@@ -58,6 +58,11 @@ def read_benchmark(path: Path) -> dict[str, float] | None:
     return values
 
 
+def benchmark_stem(rule: str) -> str:
+    """The benchmark file stem of a plan entry: 'train[conerf]' -> 'train_conerf'."""
+    return re.sub(r"\[(.*)\]", r"_\1", rule)
+
+
 def read_benchmarks(folder: Path) -> dict[str, dict[str, float]]:
     """Snakemake benchmark TSVs (s, max_rss, cpu_time, ...) by rule name (file stem)."""
     out: dict[str, dict[str, float]] = {}
@@ -247,7 +252,7 @@ def collect_scene(scene: str, inputs: ReportInputs, *, methods: list[str] | None
     """Read every input of the page from where ``inputs`` says it is; ``methods`` defaults to the manifest's."""
     benchmarks = read_benchmarks(inputs.benchmarks) if inputs.benchmarks else {}
     if plan:  # the jobs of this plan only: a method dropped from the row, or the page's own earlier build, left theirs
-        planned = {re.sub(r"\[(.*)\]", r"_\1", rule) for rule, entry in plan.items() if entry.get("needed")}
+        planned = {benchmark_stem(rule) for rule, entry in plan.items() if entry.get("needed")}
         benchmarks = {stem: v for stem, v in benchmarks.items() if stem in planned}
     sd = SceneData(scene=scene, plan=plan, inputs=inputs, benchmarks=benchmarks)
     sd.capture = _json_in(inputs.capture, "capture.json")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from collections import defaultdict
 from html import escape
 from pathlib import Path
@@ -19,7 +18,7 @@ from .html_parts import fmt, missing, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
 from .labels_section import section_labels
 from .paired import LIVESCENE, PairedResult, compare
-from .scene_data import MethodData, SceneData
+from .scene_data import MethodData, SceneData, benchmark_stem
 from .svg_plot import Series, bar_chart_svg, line_plot_svg
 from .trust import TrustFlag, assess_run
 
@@ -62,8 +61,7 @@ def _section_export(sd: SceneData) -> str:
 
 def _rule_benchmark(sd: SceneData, rule: str) -> dict | None:
     """Benchmark of a plan entry such as 'train[conerf]' (file train_conerf.tsv)."""
-    stem = re.sub(r"\[(.*)\]", r"_\1", rule)
-    return sd.benchmarks.get(stem)
+    return sd.benchmarks.get(benchmark_stem(rule))
 
 
 def section_rules(sd: SceneData) -> str:

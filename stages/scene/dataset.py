@@ -118,6 +118,12 @@ class SceneDataset:
         return len(self.objects)
 
     @property
+    def states_at_key_frames_only(self) -> bool:
+        """The published form: key frames give states and no frame carries its own (the trainer learns them, and
+        their values are normalised as the reference's, ``key_frame_states``)."""
+        return bool(self.key_frames) and not any(f.state for f in self.frames)
+
+    @property
     def has_masks(self) -> bool:
         return (self.root / "masks").is_dir()
 
@@ -179,7 +185,7 @@ class SceneDataset:
         frames = self.frames if frames is None else frames
         out = np.full((len(frames), self.n_objects), np.nan, dtype=np.float64)
         keyed: dict[str, dict[str, float]] = {}
-        if self.key_frames and not any(f.state for f in self.frames):
+        if self.states_at_key_frames_only:
             from .key_frame_states import key_frame_states
 
             keyed = {self.frames[i].frame_id: v for i, v in key_frame_states(self).by_frame.items()}

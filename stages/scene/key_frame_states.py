@@ -84,7 +84,7 @@ def key_frame_states(ds: SceneDataset) -> KeyFrameStates:
     kpath = ds.root / "key_frame_value.yaml"
     matched, _ = match_key_frames(ds.key_frames, ds.frames)
     fixed = _fixed_ranges(ds)
-    published = not any(f.state for f in ds.frames)
+    published = ds.states_at_key_frames_only
     out = KeyFrameStates()
     for name in ds.objects:
         values = [ds.key_frames[fid][name] for fid in matched if name in ds.key_frames[fid]]
