@@ -76,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     dropped = f", dropped {s['dropped_frame_count']} damaged (frames_dropped.csv)" if s["dropped_frame_count"] else ""
     factor = s["downscale_factor"]
     shrunk = f" (1/{factor} of {s['source_width']}x{s['source_height']})" if factor > 1 else ""
+    turned = f", turned {s['rotation']} degrees as the video's header says" if s.get("rotation") else ""
     print(f"kept {s['n_frames']} of {s['decoded_frame_count']} frames ({s['selection']['rule']}){dropped}, "
-          f"{s['width']}x{s['height']}{shrunk}, {s['timings']['total']:.1f} s -> {args.out}")
+          f"{s['width']}x{s['height']}{shrunk}{turned}, {s['timings']['total']:.1f} s -> {args.out}")
     return 0

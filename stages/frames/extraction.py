@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
+import shutil
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +21,8 @@ from stages.scene import atomic_dir, write_json
 from .config import FramesConfig
 from .errors import FrameSourceError
 from .frame_source import (
+    CONVERT_FIX,
+    IMAGE_SUFFIXES,
     RECOPY_FIX,
     REENCODE_FIX,
     DroppedFrame,
@@ -25,6 +30,7 @@ from .frame_source import (
     SourceFrame,
     VideoSource,
     open_source,
+    skipped_summary,
 )
 from .selection import WindowRule, downscale_factor, scaled_size
 from .sharpness import laplacian_variance
@@ -35,9 +41,16 @@ DROPPED_CSV = "frames_dropped.csv"
 DROPPED_COLUMNS = ["frame", "source_index", "timestamp", "source_file", "problem"]
 
 
-def frame_name(source_index: int) -> str:
-    """File name of an extracted frame: the contract's ``frame_{source index:05d}.png``."""
-    return f"frame_{source_index:05d}.png"
+def frame_name(source_index: int, width: int = 5) -> str:
+    """File name of an extracted frame: the contract's ``frame_{source index:05d}.png``, padded wider when a source
+    has more frames, so that names sort in frame order (COLMAP's sequential matching pairs images by name)."""
+    return f"frame_{source_index:0{width}d}.png"
+
+
+def name_width(source: VideoSource | ImageFolderSource) -> int:
+    """Digits of the source's largest index, at least 5: one width for every frame name of the source."""
+    largest = max(source.indices) if isinstance(source, ImageFolderSource) else source.n_declared - 1
+    return max(5, len(str(largest)))
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
@@ -73,6 +86,89 @@ def _refusal(source: VideoSource | ImageFolderSource, dropped: list[DroppedFrame
     return FrameSourceError(path, problem, fix)
 
 
+@dataclass
+class _Selection:
+    """What one pass over the source kept."""
+
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    dropped: list[DroppedFrame] = field(default_factory=list)
+    sharpness: list[float | None] = field(default_factory=list)
+    size: tuple[int, int] | None = None
+    n_read: int = 0
+    repeats: int = 0
+    """Frames identical to the frame before them in the source."""
+    last_whole: int = -1
+    """Position of the last frame that decoded whole."""
+
+
+def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: FramesConfig,
+            image_dirs: dict[int, Path], width: int, warn: bool = True) -> _Selection:
+    """One streaming pass: every source frame decoded once and scored; the best frame of the current window held
+    in memory until the window closes, then written (the folders are emptied first: a pass may be repeated, then
+    without ``warn``: its warnings were given)."""
+    for d in image_dirs.values():
+        if d.exists():
+            shutil.rmtree(d)
+        d.mkdir()
+    picked = _Selection()
+    allowed = math.floor(cfg.max_dropped * rule.n_total + 1e-9)
+
+    def shrink(image: np.ndarray, factor: int) -> np.ndarray:
+        return cv2.resize(image, scaled_size(image.shape[1], image.shape[0], factor), interpolation=cv2.INTER_AREA)
+
+    def keep(frame: SourceFrame, score: float, repeat: bool) -> None:
+        name = frame_name(frame.source_index, width)
+        factor = downscale_factor(frame.image.shape[1], frame.image.shape[0], cfg.max_side)
+        image = shrink(frame.image, factor) if factor > 1 else frame.image
+        _write_png(image_dirs[1] / name, image)
+        for f in cfg.downscale:
+            _write_png(image_dirs[f] / name, shrink(image, f))
+        # timestamps rounded to the nanosecond: index / fps leaves float noise (0.30000000000000004)
+        stamp = round(frame.timestamp, 9) if math.isfinite(frame.timestamp) else frame.timestamp
+        picked.rows.append({"frame": name, "source_index": frame.source_index, "timestamp": stamp,
+                            "sharpness": score, "repeat": repeat})
+
+    best: tuple[int, tuple[bool, bool, float], SourceFrame] | None = None  # (window, rank, frame)
+    previous: bytes | None = None  # digest of the frame before, to tell a repeated frame
+    with tqdm(total=source.n_declared, desc="frames", unit="frame", disable=not cfg.progress) as bar:
+        for frame in source:
+            if frame.position >= rule.n_total:  # more frames than the container declared (or a replanned pass)
+                break
+            picked.n_read += 1
+            bar.update()
+            if isinstance(frame, DroppedFrame):
+                picked.dropped.append(frame)
+                picked.sharpness.append(None)
+                previous = None
+                if warn:
+                    _warn(f"{frame.where()}: {frame.problem}; dropped (listed in {DROPPED_CSV})")
+                if len(picked.dropped) > allowed:
+                    raise _refusal(source, picked.dropped, picked.n_read, rule.n_total, cfg, none_left=False)
+                continue
+            if frame.remarks and warn:
+                _warn(f"{frame.where}: the decoder printed {' | '.join(frame.remarks[:3])!r}; kept")
+            picked.last_whole = frame.position
+            score = laplacian_variance(frame.image)
+            digest = hashlib.blake2b(frame.image.tobytes(), digest_size=16).digest()
+            repeat = digest == previous
+            previous = digest
+            picked.repeats += repeat
+            picked.sharpness.append(score)
+            picked.size = (frame.image.shape[1], frame.image.shape[0])
+            window = rule.window(frame.position)
+            if best is not None and window != best[0]:
+                keep(best[2], best[1][2], not best[1][1])
+                best = None
+            # a frame with a mask annotation wins its window (the labels stage needs it), then a frame that is not
+            # a copy of the one before (a stalled phone's), then the sharpest
+            rank = (frame.source_index in cfg.prefer, not repeat, score)
+            if best is None or rank > best[1]:
+                best = (window, rank, frame)
+    if best is not None:
+        keep(best[2], best[1][2], not best[1][1])
+    return picked
+
+
 def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
     """Write ``cfg.out_dir`` atomically and return the content of frames.json.
 
@@ -92,68 +188,48 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
     if source.remarks:
         _warn(f"{source.path}: FFmpeg printed while opening it (or counting its frames): "
               f"{' | '.join(source.remarks[:3])}")
-    rows: list[dict[str, Any]] = []
-    dropped: list[DroppedFrame] = []
-    allowed = math.floor(cfg.max_dropped * rule.n_total + 1e-9)
-    all_sharpness: list[float | None] = []
-    size: tuple[int, int] | None = None
+    skipped = getattr(source, "skipped", [])
+    if skipped:
+        _warn(f"{source.path}: left out {skipped_summary(skipped)}, which are not images this stage reads "
+              f"({', '.join(IMAGE_SUFFIXES)}); {CONVERT_FIX}")
+    width = name_width(source)
+    n_total = rule.n_total  # the source's length, as declared (a truncated video's windows are cut again)
 
     with atomic_dir(cfg.out_dir, "frames", inputs=[cfg.source], legacy=["frames.json"]) as out:
         image_dirs = {1: out / "images", **{f: out / f"images_{f}" for f in cfg.downscale}}
-        for d in image_dirs.values():
-            d.mkdir()
-
-        def shrink(image: np.ndarray, factor: int) -> np.ndarray:
-            return cv2.resize(image, scaled_size(image.shape[1], image.shape[0], factor), interpolation=cv2.INTER_AREA)
-
-        def keep(frame: SourceFrame, score: float) -> None:
-            name = frame_name(frame.source_index)
-            factor = downscale_factor(frame.image.shape[1], frame.image.shape[0], cfg.max_side)
-            image = shrink(frame.image, factor) if factor > 1 else frame.image
-            _write_png(image_dirs[1] / name, image)
-            for f in cfg.downscale:
-                _write_png(image_dirs[f] / name, shrink(image, f))
-            rows.append({"frame": name, "source_index": frame.source_index, "timestamp": frame.timestamp,
-                         "sharpness": score})
-
-        best: tuple[int, float, SourceFrame] | None = None  # (window, score, frame)
-        n_read = 0
-        with tqdm(total=source.n_declared, desc="frames", unit="frame", disable=not cfg.progress) as bar:
-            for frame in source:
-                if frame.position >= rule.n_total:  # more frames than the container declared
-                    break
-                n_read += 1
-                bar.update()
-                if isinstance(frame, DroppedFrame):
-                    dropped.append(frame)
-                    all_sharpness.append(None)
-                    _warn(f"{frame.where()}: {frame.problem}; dropped (listed in {DROPPED_CSV})")
-                    if len(dropped) > allowed:
-                        raise _refusal(source, dropped, n_read, rule.n_total, cfg, none_left=False)
-                    continue
-                if frame.remarks:
-                    _warn(f"{frame.where}: the decoder printed {' | '.join(frame.remarks[:3])!r}; kept")
-                score = laplacian_variance(frame.image)
-                all_sharpness.append(score)
-                size = (frame.image.shape[1], frame.image.shape[0])
-                window = rule.window(frame.position)
-                if best is not None and window != best[0]:
-                    keep(best[2], best[1])
-                    best = None
-                # a frame with a mask annotation wins its window (the labels stage needs it), else the sharpest
-                rank = (frame.source_index in cfg.prefer, score)
-                if best is None or rank > (best[2].source_index in cfg.prefer, best[1]):
-                    best = (window, score, frame)
-        if best is not None:
-            keep(best[2], best[1])
+        picked = _select(source, rule, cfg, image_dirs, width)
+        whole = picked.last_whole + 1
+        if picked.n_read < n_total and cfg.accept_truncated and cfg.count is not None \
+                and len(picked.rows) < min(cfg.count, whole):
+            # the windows were cut over the declared length: cut them again up to the last whole frame (the second
+            # pass stops there; what the first one read after it, and its warnings, stand)
+            _warn(f"{source.path}: the video ends after {picked.n_read} of the {n_total} frames it declares; "
+                  f"choosing the {cfg.count} frames again over the first {whole}")
+            rule = WindowRule.from_options(whole, cfg.count, None, of_declared=n_total)
+            first = picked
+            picked = _select(source, rule, cfg, image_dirs, width, warn=False)
+            picked.dropped += [d for d in first.dropped if d.position >= whole]
+            picked.sharpness, picked.n_read = first.sharpness, first.n_read
+        rows, dropped, all_sharpness, size, n_read = (picked.rows, picked.dropped, picked.sharpness, picked.size,
+                                                      picked.n_read)
+        kept_repeats = [r["frame"] for r in rows if r.pop("repeat")]
+        if picked.repeats:
+            _warn(f"{source.path}: {picked.repeats} frames repeat the frame before them exactly (a phone that "
+                  "stalled, or a still start or end); a window keeps such a frame only when it has no other"
+                  + (f" ({len(kept_repeats)} kept: {', '.join(kept_repeats[:4])}"
+                     f"{', ...' if len(kept_repeats) > 4 else ''})" if kept_repeats else ""))
         if n_read == 0:
-            raise FrameSourceError(source.path, "no frame could be decoded", REENCODE_FIX)
+            codec = getattr(source, "codec", "")
+            raise FrameSourceError(source.path, "no frame could be decoded" + (
+                f" (codec '{codec}': this OpenCV build may have no decoder for it)" if codec else ""),
+                REENCODE_FIX if not codec else "re-encode it to H.264 (`ffmpeg -i VIDEO -c:v libx264 -pix_fmt "
+                "yuv420p fixed.mp4`) or extract its frames into an image folder and pass that folder as --video")
         if not rows:
             raise _refusal(source, dropped, n_read, rule.n_total, cfg, none_left=True)
-        if n_read < rule.n_total and not cfg.accept_truncated:
+        if n_read < n_total and not cfg.accept_truncated:
             raise FrameSourceError(
                 source.path,
-                f"decoding stopped after {n_read} of the {rule.n_total} frames the video declares "
+                f"decoding stopped after {n_read} of the {n_total} frames the video declares "
                 f"(truncated or corrupt from frame {n_read} on)",
                 REENCODE_FIX + f", or pass --accept-truncated to keep what the first {n_read} frames give")
 
@@ -161,7 +237,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
         written = scaled_size(*size, factor) if size else None
         table = pd.DataFrame(rows, columns=["frame", "source_index", "timestamp", "sharpness"])
         table.to_csv(out / "frames.csv", index=False)
-        dropped_rows = [{"frame": frame_name(d.source_index), "source_index": d.source_index,
+        dropped_rows = [{"frame": frame_name(d.source_index, width), "source_index": d.source_index,
                          "timestamp": d.timestamp, "source_file": str(d.source_file), "problem": d.problem}
                         for d in dropped]
         pd.DataFrame(dropped_rows, columns=DROPPED_COLUMNS).to_csv(out / DROPPED_CSV, index=False)
@@ -171,12 +247,15 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "source": str(Path(cfg.source).resolve()),
             "source_kind": source.kind,
             "fps": None if math.isnan(source.fps) else source.fps,
-            "source_frame_count": rule.n_total,
+            "source_frame_count": n_total,
             # an image folder's frames are the numbers in its names (IMG_4501 ...), not 0..count-1 as a video's
             "source_indices": list(source.indices) if source.kind == "images" else None,
             "decoded_frame_count": n_read,
-            "truncated": n_read < rule.n_total,
+            "truncated": n_read < n_total,
             "dropped_frame_count": len(dropped),
+            "repeated_frame_count": picked.repeats,
+            "kept_repeats": kept_repeats,
+            "skipped_files": [p.name for p in skipped],
             "max_dropped": cfg.max_dropped,
             "dropped": [{k: v for k, v in r.items() if k != "timestamp"} for r in dropped_rows],
             "width": written[0] if written else None,

@@ -13,7 +13,6 @@ windows and source indices of the other frames stay where they were.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,12 +23,15 @@ import numpy as np
 from stages.scene import frame_number_of
 
 from .errors import FrameSourceError
+from .folder_numbering import check_numbering, natural_key
 from .integrity import DecoderReport, StderrCapture, decode_image
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 REENCODE_FIX = ("check that the file plays and was copied completely; re-encode it "
                 "(`ffmpeg -i VIDEO -c:v libx264 -pix_fmt yuv420p fixed.mp4`) or extract its frames into an "
                 "image folder and pass that folder as --video")
+CONVERT_FIX = ("convert photos the stage cannot read (HEIC, RAW such as DNG) to JPEG or PNG, or pass a video file; "
+               "a video belongs in --video by itself, not in a folder of frames")
 RECOPY_FIX = ("copy the images again from the camera or phone (these copies are incomplete or damaged), "
               "or delete the broken ones")
 MAX_CONSECUTIVE_FAILURES = 16
@@ -94,12 +96,14 @@ class VideoSource:
         with StderrCapture() as stderr:
             capture, text = stderr.call(lambda: cv2.VideoCapture(str(self.path)))
         said = DecoderReport.from_text(text)
-        lines = said.damage + said.remarks
+        lines = tuple(dict.fromkeys(said.damage + said.remarks))  # FFmpeg repeats a line per probe
         self.remarks: tuple[str, ...] = lines  # what FFmpeg printed while opening it (warned of, naming the video)
         if not capture.isOpened():
             raise FrameSourceError(self.path, "OpenCV cannot open it as a video (unknown format, corrupt data, "
                                    "or an mp4 cut off before its index)"
                                    + (f"; FFmpeg said {said.summary(lines)}" if lines else ""), REENCODE_FIX)
+        self.codec = fourcc_text(capture.get(cv2.CAP_PROP_FOURCC))
+        """The stream's codec tag (``avc1``, ``hvc1``, ``av01``, ``mp4v``, ``MJPG``), '' when OpenCV gives none."""
         self.fps = float(capture.get(cv2.CAP_PROP_FPS))
         if not (math.isfinite(self.fps) and self.fps > 0):
             self.fps = float("nan")
@@ -206,11 +210,14 @@ class ImageFolderSource:
     def __init__(self, path: Path, fps: float | None = None) -> None:
         self.path = Path(path)
         # hidden files are no frames: macOS leaves ``._IMG_0001.jpg`` (its metadata) beside every photo it copies
-        files = [p for p in self.path.iterdir()
-                 if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")]
+        visible = [p for p in self.path.iterdir() if p.is_file() and not p.name.startswith(".")]
+        files = [p for p in visible if p.suffix.lower() in IMAGE_SUFFIXES]
+        self.skipped = sorted((p for p in visible if p.suffix.lower() not in IMAGE_SUFFIXES), key=natural_key)
+        """Files of the folder that are not images this stage reads (HEIC, RAW, sidecars): warned of by name."""
         if not files:
-            raise FrameSourceError(self.path, f"the folder holds no images ({', '.join(IMAGE_SUFFIXES)})",
-                                   "pass a video file or a folder of frames")
+            raise FrameSourceError(self.path, f"the folder holds no images ({', '.join(IMAGE_SUFFIXES)})"
+                                   + (f"; it holds {skipped_summary(self.skipped)}" if self.skipped else ""),
+                                   CONVERT_FIX if self.skipped else "pass a video file or a folder of frames")
         numbers = [frame_number_of(p.stem) for p in files]
         numbered = all(n is not None for n in numbers)
         if numbered:
@@ -218,15 +225,17 @@ class ImageFolderSource:
             for n, p in zip(numbers, files, strict=True):
                 if n in first:
                     a, b = sorted((first[n].name, p.name))
-                    raise FrameSourceError(self.path, f"two images carry frame number {n} ({a}, {b})",
+                    raise FrameSourceError(self.path, f"two images carry frame number {n} ({a}, {b}; the number "
+                                           "is the last `_`-separated token of a name, else its last run of digits)",
                                            "keep one image per frame number (the number in a name orders the "
                                            "frames)")
                 first[n] = p
+            check_numbering(self.path, files, numbers)  # type: ignore[arg-type]
             pairs = sorted(zip(numbers, files, strict=True))
             self.files = [p for _, p in pairs]
             self.indices = [n for n, _ in pairs]
         else:  # some names carry no number: playback order = name order, numbers in names compared as numbers
-            self.files = sorted(files, key=_natural_key)
+            self.files = sorted(files, key=natural_key)
             self.indices = list(range(len(files)))
         self.numbered = numbered
         self.remarks: tuple[str, ...] = ()
@@ -258,10 +267,21 @@ class ImageFolderSource:
                                   remarks=remarks, where=str(path))
 
 
-def _natural_key(path: Path) -> list[tuple[int, int | str]]:
-    """``img2.png`` before ``img10.png``: digit runs compared as numbers, the rest as case-folded text."""
-    return [(0, int(part)) if part.isdigit() else (1, part.casefold())
-            for part in re.split(r"(\d+)", path.name) if part]
+def fourcc_text(value: float) -> str:
+    """OpenCV's CAP_PROP_FOURCC (four bytes, low byte first) as text; '' when unset or not printable."""
+    code = int(value) if value == value and value > 0 else 0
+    text = "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4)).strip("\x00 ")
+    return text if text.isprintable() else ""
+
+
+def skipped_summary(files: list[Path]) -> str:
+    """``3 other files (2 .heic, 1 .mov: IMG_15.HEIC, IMG_16.heic, ...)`` for a message."""
+    kinds: dict[str, int] = {}
+    for p in files:
+        kinds[p.suffix.lower() or "no extension"] = kinds.get(p.suffix.lower() or "no extension", 0) + 1
+    counts = ", ".join(f"{n} {k}" for k, n in sorted(kinds.items(), key=lambda kv: (-kv[1], kv[0])))
+    names = ", ".join(p.name for p in files[:4]) + (", ..." if len(files) > 4 else "")
+    return f"{len(files)} other file{'s' if len(files) != 1 else ''} ({counts}: {names})"
 
 
 def open_source(path: Path, fps: float | None = None) -> VideoSource | ImageFolderSource:

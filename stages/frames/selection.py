@@ -25,15 +25,18 @@ class WindowRule:
     """Windows the source is cut into (= frames kept)."""
     stride: int | None
     """Window length for the stride rule; None for the count rule (equal split of n_total)."""
+    of_declared: int | None = None
+    """A truncated video's declared length, when the windows were cut again over the frames that decode."""
 
     @classmethod
-    def from_options(cls, n_total: int, count: int | None, stride: int | None) -> WindowRule:
+    def from_options(cls, n_total: int, count: int | None, stride: int | None,
+                     of_declared: int | None = None) -> WindowRule:
         if count is not None and stride is not None:
             raise ValueError("give either count or stride, not both")
         if count is not None:
             if count < 1:
                 raise ValueError(f"count must be >= 1, got {count}")
-            return cls(n_total=n_total, n_windows=min(count, n_total), stride=None)
+            return cls(n_total=n_total, n_windows=min(count, n_total), stride=None, of_declared=of_declared)
         stride = 1 if stride is None else stride
         if stride < 1:
             raise ValueError(f"stride must be >= 1, got {stride}")
@@ -46,9 +49,12 @@ class WindowRule:
         return position * self.n_windows // self.n_total
 
     def describe(self) -> str:
+        if self.stride == 1:
+            return "every frame"
         if self.stride is not None:
             return f"sharpest frame in each window of {self.stride} consecutive frames"
-        return f"sharpest frame in each of {self.n_windows} equal windows over {self.n_total} frames"
+        decoded = f" (of {self.of_declared} declared: the video ends early)" if self.of_declared else ""
+        return f"sharpest frame in each of {self.n_windows} equal windows over {self.n_total} frames{decoded}"
 
 
 def sharpest_per_window(sharpness: list[float], rule: WindowRule) -> list[int]:

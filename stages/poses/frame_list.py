@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from stages.scene import InputError, frame_id_of
+from stages.scene import InputError, frame_number_of
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+FRAMES_FIRST = "run `livescene frames --video FOLDER --out FRAMES` first and pass FRAMES"
 
 
 @dataclass
@@ -22,7 +23,7 @@ class FrameList:
     names: list[str]
     """Image file names, sorted (COLMAP's sequential matching pairs neighbours in name order)."""
     source_index: dict[str, int | None]
-    """Name -> index of the frame in the source video (from frames.csv, else the numeric frame id)."""
+    """Name -> index of the frame in the source video (from frames.csv, else the number in the name)."""
 
 
 def read_frame_list(frames_dir: Path) -> FrameList:
@@ -33,18 +34,22 @@ def read_frame_list(frames_dir: Path) -> FrameList:
     image_dir = frames_dir / "images" if (frames_dir / "images").is_dir() else frames_dir
     names = sorted(p.name for p in image_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
     if not names:
-        raise InputError(image_dir, "no images (.png/.jpg) found",
-                         "point --frames to the output of `livescene frames` (it holds images/)")
+        others = sorted({p.suffix.lower() for p in image_dir.iterdir() if p.is_file() and p.suffix})
+        raise InputError(image_dir, f"no images ({', '.join(IMAGE_SUFFIXES)}) found"
+                         + (f"; it holds {', '.join(others)} files" if others else ""),
+                         "point --frames to the output of `livescene frames` (it holds images/; the frames stage "
+                         "also reads .webp)")
     index: dict[str, int | None] = {}
     csv = frames_dir / "frames.csv"
     if csv.is_file():
         table = pd.read_csv(csv)
         if {"frame", "source_index"} <= set(table.columns):
             index = {str(f): int(s) for f, s in zip(table["frame"], table["source_index"], strict=True)}
+    if not csv.is_file():
+        check_orientation(image_dir, names)
     for name in names:
         if name not in index:
-            fid = frame_id_of(Path(name).stem)
-            index[name] = int(fid) if fid.isdigit() else None
+            index[name] = frame_number_of(Path(name).stem)  # as the frames stage reads a folder's names
     return FrameList(image_dir=image_dir, names=names, source_index={n: index[n] for n in names})
 
 
@@ -55,3 +60,33 @@ def time_order(names: list[str], source_index: Mapping[str, int | None]) -> tupl
         return ordered, {n: float(source_index[n]) for n in ordered}  # type: ignore[arg-type]
     ordered = sorted(names)
     return ordered, {n: float(k) for k, n in enumerate(ordered)}
+
+
+def check_orientation(image_dir: Path, names: list[str]) -> None:
+    """Refuse photos whose EXIF orientation turns them: COLMAP reads the stored pixels, while every other stage
+    (OpenCV) shows them turned, so poses, masks and training would disagree (``livescene frames`` turns them)."""
+    from PIL import Image, UnidentifiedImageError
+
+    for name in names:
+        if Path(name).suffix.lower() not in (".jpg", ".jpeg", ".tif", ".tiff"):
+            continue
+        try:
+            with Image.open(image_dir / name) as image:
+                orientation = int(image.getexif().get(0x0112, 1))  # EXIF Orientation; reads the header only
+        except (OSError, UnidentifiedImageError, ValueError, TypeError):
+            continue  # an unreadable file is named by the stage that decodes it
+        if orientation not in (0, 1):
+            raise InputError(image_dir / name, f"its EXIF orientation ({orientation}) turns the stored pixels for "
+                             "display; COLMAP reads them unturned, so poses would not fit the picture that masks "
+                             "and training see", FRAMES_FIRST + " (it writes the frames turned upright)")
+
+
+def check_name_order(frames: FrameList, ordered: list[str], matcher: str) -> None:
+    """COLMAP's sequential matching pairs images in name order: refuse a folder whose name order is not its frame
+    order (``IMG_10.jpg`` sorts before ``IMG_2.jpg``), which would pair frames far apart and break the model."""
+    if matcher != "sequential" or ordered == frames.names:
+        return
+    k = next(k for k, n in enumerate(ordered) if frames.names[k] != n)
+    raise InputError(frames.image_dir, f"COLMAP's sequential matching pairs images in name order, which is not "
+                     f"their frame order here ({frames.names[k]} sorts before {ordered[k]}, an earlier frame)",
+                     FRAMES_FIRST + " (its names sort in frame order), or pass --matcher exhaustive")

@@ -17,7 +17,7 @@ from stages.scene import atomic_dir, write_json
 from .camera_motion import FeatureMotion, feature_motion
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
-from .frame_list import read_frame_list, time_order
+from .frame_list import check_name_order, read_frame_list, time_order
 from .model_export import drop_frames, judge_camera_path, registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
@@ -30,7 +30,7 @@ from .quality_gate import (
     registration_advice,
     too_few_frames_advice,
 )
-from .sfm import SfmResult, run_sfm
+from .sfm import SfmResult, resolve_matcher, run_sfm
 from .static_check import MotionPrecheck, measure_motion
 from .world_frame import orient_reconstruction
 
@@ -58,6 +58,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         raise InputError(frames.image_dir / names[0], "image unreadable", "re-extract the frames")
     diagonal = float(np.hypot(*first.shape))
     ordered, times = time_order(frames.names, frames.source_index)
+    check_name_order(frames, ordered, resolve_matcher(cfg, len(names)))
     # a still camera is refused here in seconds, not after minutes of COLMAP (docs/poses.md, Quality gate)
     pre = measure_motion(frames.image_dir, ordered, cfg.static_motion_fraction, cfg.masks_dir)
     check_precheck(pre, ordered, cfg.frames_dir)
