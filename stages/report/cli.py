@@ -2,7 +2,7 @@
 
     livescene report sweep --run RUN --data DS --out DIR [--steps 5] [--scale 0.5]
     livescene report scene --scene NAME --inputs INPUTS.json --out PAGE.html [--index INDEX.html]
-    livescene report index --summaries S1.json S2.json --out INDEX.html
+    livescene report index --summaries S1.json S2.json [--earlier S3.json] --out INDEX.html
 
 INPUTS.json names the file or folder of each role the page reads (dataset, poses, runs per method, ...);
 the page reads nothing else. Format: docs/workflow.md, "The report".
@@ -50,6 +50,9 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
     i = sub.add_parser("index", help="write the index page from the scenes' summaries (each links its page)")
     i.add_argument("--summaries", nargs="+", required=True, help="summary.json of each scene")
     i.add_argument("--pending", default="", help="comma-separated scenes of the sheet without a page yet")
+    i.add_argument("--earlier", nargs="*", default=[],
+                   help="summary.json of the sheet's other scenes whose pages an earlier run wrote: listed apart, "
+                        "outside the verdicts and verdicts.csv")
     i.add_argument("--out", required=True, help="index HTML to write")
     i.add_argument("--csv", default="", help="also write every scene's paired verdicts here (one row per scene, "
                    "baseline and metric)")
@@ -110,7 +113,9 @@ def _index(args: argparse.Namespace) -> int:
     from .verdict_table import verdict_rows, verdicts_csv
 
     summaries = load_summaries(args.summaries)
-    write_text(Path(args.out), build_index(summaries, pending=[s for s in args.pending.split(',') if s]))
+    earlier = load_summaries(args.earlier)
+    write_text(Path(args.out), build_index(summaries, pending=[s for s in args.pending.split(',') if s],
+                                           earlier=earlier))
     print(args.out)
     if args.csv:
         write_text(Path(args.csv), verdicts_csv(verdict_rows(summaries)))

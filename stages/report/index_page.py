@@ -27,33 +27,56 @@ def load_summaries(summary_files: list[str | Path]) -> list[dict]:
     return out
 
 
-def build_index(summaries: list[dict], pending: list[str] | None = None) -> str:
-    """HTML of the index page from the scenes' summaries (each links its page by its "page"); ``pending``
-    names the sheet's scenes that have no page yet (a run restricted with ``--config only=...``)."""
+def build_index(summaries: list[dict], pending: list[str] | None = None, earlier: list[dict] | None = None) -> str:
+    """HTML of the index page from the summaries of the scenes this run built (each links its page by its "page");
+    ``earlier`` are pages of the sheet's other scenes that an earlier run wrote (``--config only=...``): listed
+    apart, outside the verdicts and their tally, as their settings may differ; ``pending`` names the sheet's
+    scenes with no page at all."""
     verdicts = verdict_rows(summaries)
-    rows = []
-    for s in summaries:
-        methods = "<br>".join(f"{escape(name)}: PSNR {fmt(v.get('psnr'), 2)} dB, SSIM {fmt(v.get('ssim'), 3)}, "
-                              f"{fmt(v.get('train_seconds'), 0)} s training" + _flag(v.get("trust"))
-                              for name, v in s["methods"].items())
-        rows.append([f'<a href="{escape(s["page"])}">{escape(s["scene"])}</a>',
-                     escape(", ".join(s.get("objects", []))), s.get("frames"), s.get("registered_fraction"),
-                     methods or "–", _verdicts(verdicts[verdicts["scene"] == s.get("scene")]),
-                     escape(", ".join(s.get("skipped", [])) or "none"), s.get("job_seconds")])
+    rows = [_scene_row(s, verdicts) for s in summaries]
     waiting = ""
     if pending:
         names = ", ".join(escape(n) for n in pending)
-        waiting = (f"<p>Scenes of the sheet without a page yet: {names}. Build one with "
-                   f"<code>snakemake --cores 2 --config only={escape(pending[0])}</code>.</p>")
+        waiting = (f"<p>Scenes of the sheet without a page (not built by this run nor an earlier one; a scene whose "
+                   f"jobs failed stays here until they succeed: Snakemake's error names the failing job's log): "
+                   f"{names}. Build one with <code>snakemake --cores 2 --config only={escape(pending[0])}</code>."
+                   "</p>")
+    before = ""
+    if earlier:
+        old_verdicts = verdict_rows(earlier)
+        before = ("<h2>Pages from earlier runs</h2><p>Scenes of the sheet this run did not build (it was restricted "
+                  "with <code>--config only=...</code>): their pages as an earlier run left them, built with the "
+                  "settings of that run, which may differ from this one's. They are not in the verdicts above nor "
+                  "in <code>verdicts.csv</code>; rebuild one with <code>snakemake --cores 2 --config "
+                  f"only={escape(earlier[0]['scene'])}</code>.</p>"
+                  + table([*SCENE_HEADERS, "page built"],
+                          [[*_scene_row(s, old_verdicts), escape(str(s.get("built") or "–"))] for s in earlier]))
     # the verdicts first: over a sheet of rooms they are what the index is read for; the scenes table below
     # counts them per baseline and links each scene's page
     body = ("<h1>LiveScene reports</h1><p>One page per scene of the scene sheet; each opens offline. A flagged run "
             "(&#9888;) is under its trust floors: its numbers are not results.</p>"
             + "<h2>Verdicts across scenes</h2>" + verdict_matrix_html(verdicts)
-            + "<h2>Scenes</h2>"
-            + table(["scene", "objects", "frames", "poses registered", "methods (held-out)",
-                     "LiveScene vs baselines (paired metrics)", "rules skipped", "job seconds"], rows) + waiting)
+            + "<h2>Scenes</h2>" + table(SCENE_HEADERS, rows) + waiting + before)
     return page("LiveScene reports", body)
+
+
+SCENE_HEADERS = ["scene", "objects", "frames", "poses registered", "methods (held-out)",
+                 "LiveScene vs baselines (paired metrics)", "rules skipped", "job seconds"]
+
+
+def _scene_row(s: dict, verdicts: pd.DataFrame) -> list:
+    """One scene's row of the scenes table: its link, headline numbers and verdict counts."""
+    methods = "<br>".join(f"{escape(name)}: PSNR {fmt(v.get('psnr'), 2)} dB, SSIM {fmt(v.get('ssim'), 3)}, "
+                          f"{fmt(v.get('steps'))} steps, {fmt(v.get('train_seconds'), 0)} s training"
+                          + _flag(v.get("trust"))
+                          for name, v in s["methods"].items())
+    registered = s.get("registered_fraction")
+    seconds = s.get("job_seconds")
+    return [f'<a href="{escape(s["page"])}">{escape(s["scene"])}</a>', escape(", ".join(s.get("objects", []))),
+            s.get("frames"), f"{registered:.0%}" if isinstance(registered, (int, float)) else "–",
+            methods or "–", _verdicts(verdicts[verdicts["scene"] == s.get("scene")]) if not verdicts.empty else "–",
+            escape(", ".join(s.get("skipped", [])) or "none"),
+            fmt(float(seconds), 0) if isinstance(seconds, (int, float)) else "–"]
 
 
 def _flag(trust: dict | None) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from collections import defaultdict
+from datetime import datetime, timezone
 from html import escape
 from pathlib import Path
 from typing import Any
@@ -668,8 +669,17 @@ def scene_summary(sd: SceneData, page: str) -> dict:
                                  "trust": flags[m.name].to_dict() if m.name in flags else None}
                         for m in sd.methods},
             "verdict": [r.to_dict() for r in scene_verdict(sd, flags)],
-            "skipped": [k for k, v in sd.plan.items() if not v.get("needed")],
-            "job_seconds": round(_scene_seconds(sd), 1)}
+            "skipped": [k for k, v in sd.plan.items() if not v.get("needed") and _of_scene(k, sd)],
+            "job_seconds": round(_scene_seconds(sd), 1),
+            # when the page was built: the index shows it for pages an earlier run left (summary only, not the page)
+            "built": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+
+
+def _of_scene(rule: str, sd: SceneData) -> bool:
+    """A plan entry that concerns this scene: not one of a method the scene's row does not list
+    (``train[k-planes]``)."""
+    method = rule.partition("[")[2].rstrip("]")
+    return not method or method in {m.name for m in sd.methods}
 
 
 def build_scene_page(sd: SceneData, *, views: int = 3, index: str | None = None) -> str:

@@ -95,12 +95,13 @@ def verdict_matrix_html(frame: pd.DataFrame) -> str:
     for (baseline, metric), group in frame.groupby(["baseline", "metric"], sort=False):
         # a verdict that rests on a run under its trust floors is not a result: counted apart, not ranked
         trusted = group[group["rests_on_flagged_run"].fillna("") == ""]
-        tally.append([escape(str(baseline)), escape(LABELS.get(metric, metric)), len(group), *verdict_counts(trusted),
-                      len(group) - len(trusted)])
+        counts = verdict_counts(trusted)
+        tally.append([escape(str(baseline)), escape(LABELS.get(metric, metric)), len(group), *counts,
+                      len(group) - len(trusted), len(trusted) - sum(counts)])
     return ("<p>LiveScene minus each baseline on the same items, per scene: the verdict, the mean difference and "
             "its 95% interval (ahead or behind only when the interval excludes 0; locality is lower-is-better, "
             "so there a negative difference is ahead). Each scene page says what its items are.</p>"
             + table(headers, rows)
             + "<p>Across the scenes:</p>"
             + table(["baseline", "paired metric", "scenes", "ahead", "level", "behind",
-                     "on a flagged run (not counted)"], tally))
+                     "on a flagged run (not counted)", "no paired items (e.g. no unseen combination)"], tally))

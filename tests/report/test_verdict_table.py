@@ -109,3 +109,32 @@ def test_index_names_an_unreadable_summary(tmp_path):
     bad.write_text("{not json")
     with pytest.raises(InputError, match="unreadable scene summary"):
         load_summaries([bad])
+
+
+def test_the_tally_adds_up_with_scenes_without_paired_items():
+    import re
+
+    tally = verdict_matrix_html(verdict_rows(SUMMARIES)).split("<table")[2]
+    assert "no paired items" in tally
+    # pantry has no unseen combination: counted, and said so, not left out of ahead + level + behind
+    assert "<td>mk-planes</td><td>unseen-combination PSNR per (view, state vector)</td><td class=\"num\">1</td>" + \
+           "<td class=\"num\">0</td>" * 4 + "<td class=\"num\">1</td>" in tally
+    for row in tally.split("<tr>")[2:]:
+        scenes, ahead, level, behind, flagged, none = map(int, re.findall(r'class="num">(\d+)<', row))
+        assert scenes == ahead + level + behind + flagged + none, row
+
+
+def test_pages_of_earlier_runs_are_listed_apart_and_outside_the_verdicts(tmp_path):
+    files = {}
+    for s in SUMMARIES:
+        files[s["scene"]] = tmp_path / f"{s['scene']}.json"
+        files[s["scene"]].write_text(json.dumps({**s, "built": "2026-11-28 21:04 UTC"}))
+    out, csv = tmp_path / "reports" / "index.html", tmp_path / "reports" / "verdicts.csv"
+    assert report_main(["index", "--summaries", str(files["office"]), "--earlier", str(files["pantry"]),
+                        "--out", str(out), "--csv", str(csv)]) == 0
+    page = out.read_text()
+    current, earlier = page.split("<h2>Pages from earlier runs</h2>")
+    assert 'href="scenes/pantry.html"' in earlier and "2026-11-28 21:04 UTC" in earlier
+    assert "pantry" not in current  # not in the matrix, the tally or the scenes table of this run
+    assert "settings of that run, which may differ" in earlier and "--config only=pantry" in earlier
+    assert set(pd.read_csv(csv)["scene"]) == {"office"}

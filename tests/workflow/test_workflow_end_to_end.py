@@ -93,7 +93,7 @@ def test_tiny_scene_end_to_end(workflow_copy, tmp_path, chromium):
                          "--forcerun", "report_scene")
     assert alone.code == 0, alone.output[-3000:]
     assert "scene=filmed" not in alone.output and "scene=tiny" in alone.output
-    assert "results/filmed/report/summary.json" in alone.output  # listed in the index from the earlier run
+    assert "--earlier results/filmed/report/summary.json" in alone.output  # listed apart from the earlier run
 
     # a training killed on its own (a scheduler's SIGTERM) leaves its checkpoint and no run.json: the rerun
     # trains again (resuming), then evaluates and reports again; it had said "Nothing to be done"

@@ -51,7 +51,9 @@ def mixed_plan(tmp_path_factory):
          "truth": "yes", "methods": "livescene"},
         *({"scene": f"static{poses}", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": poses,
            "masks": "no", "key_frames": "no", "names": "no", "truth": "yes", "methods": "livescene"}
-          for poses in ("given", "estimate"))])
+          for poses in ("given", "estimate")),
+        {"scene": "baseline", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
+         "truth": "yes", "methods": "mk-planes"}])
     return wf.dry_run()
 
 
@@ -82,6 +84,12 @@ def test_scene_without_names_skips_language(mixed_plan):
     assert not any("--missing-masks" in t for t in filmed["labels"])  # the default, the stage's own: propagate
     assert "capture" not in filmed and "pose_compare" not in filmed
     assert "frames" not in mixed_plan.scene_jobs("plain")
+
+
+def test_language_targets_only_for_a_scene_that_trains_livescene(mixed_plan):
+    jobs = mixed_plan.scene_jobs("baseline")  # names given, but only MK-Planes, which has no language table
+    assert "language_targets" not in jobs and len(jobs["train"]) == 1
+    assert len(mixed_plan.scene_jobs("given")["language_targets"]) == 1
 
 
 def test_synthetic_with_given_poses_uses_the_truth_dataset(mixed_plan):
@@ -169,7 +177,7 @@ def test_scene_sheet_errors_name_line_scene_and_column(workflow_copy):
     assert "line 3 (scene 'typo'): key 'source'" in run.output and "'synthetik'" in run.output
     assert "line 4 (scene 'ready'): column 'poses'" in run.output
     assert "line 5 (scene 'odd'): key 'methods'" in run.output
-    assert "duplicate scene name(s) ['ok']" in run.output
+    assert "column 'scene': 'ok' names the rows of lines 2, 6; fix: give each row its own scene name" in run.output
 
 
 def test_scene_sheet_checks_values_against_the_source(workflow_copy, tmp_path):
@@ -375,6 +383,32 @@ def test_only_builds_the_named_scenes(workflow_copy):
     assert len(index) == 1 and "--pending a" in index[0]
     bad = workflow_copy.snakemake("-n", "--cores", "1", "--config", "only=c")
     assert bad.code != 0 and "config key 'only': scene(s) ['c'] are not in the scene sheet" in bad.output
+    # named as one writes a list, or twice: each scene once
+    run = workflow_copy.dry_run("--config", "only= b, b")
+    index = [text for rule, text in run.blocks() if rule == "report_index"]
+    assert "input: results/b/report/summary.json, reports/scenes/b.html\n" in index[0]
+    # the sheet's name mistaken for the selection points to 'only'
+    bad = workflow_copy.snakemake("-n", "--cores", "1", "--config", "scenes=b")
+    assert bad.code != 0 and "to build some scenes of the sheet, name them with --config only=b" in bad.output
+
+
+def test_a_wrong_row_not_selected_does_not_hold_up_the_others(workflow_copy, tmp_path):
+    workflow_copy.write_scenes([
+        {"scene": "a", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"},
+        {"scene": "b", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene",
+         "masks": tmp_path / "missing_masks"},
+        {"scene": "c", "source": "synthetic", "path": "config/captures/tiny.yaml",
+         "methods": "livescene,mk-planes,livescene"}])
+    run = workflow_copy.dry_run("--config", "only=a")
+    assert run.scene_jobs("a") and not run.scene_jobs("b") and not run.scene_jobs("c")
+    assert "warning: " in run.output and "line 3 is left out of this run (not named by 'only')" in run.output
+    assert "missing_masks' does not exist" in run.output
+    assert "line 4 is left out" in run.output and "livescene listed more than once" in run.output
+    every = workflow_copy.snakemake("-n", "--cores", "1")  # every row asked for: every wrong cell refused
+    assert every.code != 0 and "line 3 (scene 'b'): column 'masks'" in every.output
+    assert "line 4 (scene 'c'): column 'methods': livescene listed more than once" in every.output
+    named = workflow_copy.snakemake("-n", "--cores", "1", "--config", "only=a,b")
+    assert named.code != 0 and "line 3 (scene 'b')" in named.output
 
 
 def test_poses_orient_false_keeps_every_world(workflow_copy, tmp_path):

@@ -149,7 +149,10 @@ def plan(scene):
     exposure = appearance in ("auto", "measured")
     p["exposure"] = (exposure, "frames' exposure measured once for every method (train.appearance: "
                      f"{appearance})" if exposure else f"train.appearance is {appearance}")
-    p["language_targets"] = (has_names(scene), "object names given" if has_names(scene) else "scene has no names")
+    # only LiveScene trains a language table (the baselines' grounding is read from their label fields)
+    targets = has_names(scene) and "livescene" in methods(scene)
+    p["language_targets"] = (targets, "object names given" if targets else "scene has no names"
+                             if not has_names(scene) else "LiveScene is not trained for this scene")
     for m in METHODS:
         chosen = m in methods(scene)
         p[f"train[{m}]"] = (chosen, "listed for this scene" if chosen else "method not listed for this scene")
@@ -236,4 +239,19 @@ def log_path(name):
 def bench_path(name):
     return str(Path(RESULTS, "{scene}", "benchmarks", f"{name}.tsv"))
 
+
+def failed_scenes(logfiles):
+    """The selected scenes of this run's failed jobs, read from Snakemake's own log: each error block names the
+    failing job's log file, and a scene's job logs are <results>/<scene>/logs/."""
+    import re
+
+    # a job's start names its log too: only an error block's line ends with Snakemake's hint
+    pattern = re.compile(rf"^\s+log: {re.escape(str(Path(RESULTS)))}/([^/\s]+)/logs/.*\(check log file", re.MULTILINE)
+    found = []
+    for name in logfiles or []:
+        try:
+            found += pattern.findall(Path(name).read_text(errors="replace"))
+        except OSError:
+            continue
+    return [s for s in dict.fromkeys(found) if s in SELECTED]
 

@@ -91,8 +91,8 @@ rule report_index:
         str(Path(RESULTS, "benchmarks", "report_index.tsv"))
     params:
         cli=LIVESCENE,
-        # Pages of the sheet's other scenes made by earlier runs (`--config only=...`) are listed too.
-        earlier=lambda w: " ".join(q(s) for s in earlier_summaries()),
+        # Pages of the sheet's other scenes made by earlier runs (`--config only=...`) are listed apart.
+        earlier=lambda w: " ".join(["--earlier"] + [q(s) for s in earlier_summaries()]) if earlier_summaries() else "",
         pending=lambda w: pending_arg(),
     threads: 1
     resources:
@@ -103,3 +103,4 @@ rule report_index:
     shell:
         "{params.cli} report index --summaries {input.summaries:q} {params.earlier} {params.pending}"
         " --out {output.index:q} --csv {output.csv:q} > {log:q} 2>&1"
+

@@ -3,6 +3,7 @@
 import csv
 import json
 import shlex
+import sys
 from pathlib import Path
 
 import jsonschema
@@ -182,6 +183,9 @@ def _item_problems(record, kind, poses):
     problems = []
     masks, keys, names = (record.get(c, ITEM_DEFAULTS[c]) for c in ("masks", "key_frames", "names"))
     methods = [m.strip() for m in record.get("methods", ",".join(config["methods"])).split(",") if m.strip()]
+    repeated = sorted({m for m in methods if methods.count(m) > 1})
+    if repeated:
+        problems.append(f"column 'methods': {', '.join(repeated)} listed more than once; fix: list each method once")
     if keys not in ("yes", "no") and Path(keys).is_dir():
         problems.append(f"column 'key_frames': {keys!r} is a folder; fix: give the key-frame file "
                         "(key_frame_value.yaml, annotations.yml or a CSV)")
@@ -272,30 +276,43 @@ def _read_scene_sheet(path):
     """Read and validate the scene sheet; errors name the file, the line, the scene and the column."""
     sheet_path = Path(path)
     if not sheet_path.is_file():
+        hint = "" if "/" in str(path) or sheet_path.suffix else \
+            f" (to build some scenes of the sheet, name them with --config only={path})"
         raise WorkflowError(f"{sheet_path}: the scene sheet does not exist; fix: write it (see docs/workflow.md) "
-                            "or point config key 'scenes' at it")
+                            f"or point config key 'scenes' at it{hint}")
     sheet, numbers, problems = _sheet_table(sheet_path)
     schema = SCENE_SCHEMA
-    unknown = [c for c in sheet.columns if c not in schema["properties"]]
-    if unknown:
-        problems.append(f"header: unknown column(s) {unknown}; known: {list(schema['properties'])}")
+    unknown_columns = [c for c in sheet.columns if c not in schema["properties"]]
+    if unknown_columns:
+        problems.append(f"header: unknown column(s) {unknown_columns}; known: {list(schema['properties'])}")
+    wanted = _wanted_scenes()
+    left_out = []  # rows not selected by 'only' whose cells are wrong: they cannot hold up the rows asked for
     for line, row in zip(numbers, sheet.to_dict("records")):
         record = {k: v for k, v in row.items() if v != "" and k in schema["properties"]}
         name = row.get("scene") or f"line {line}"
         errors = list(jsonschema.Draft202012Validator(schema).iter_errors(record))
-        for error in errors:
-            problems.append(f"line {line} (scene {name!r}): {_schema_problem(error)}")
+        found = [f"line {line} (scene {name!r}): {_schema_problem(error)}" for error in errors]
         if not errors:
-            problems += [f"line {line} (scene {name!r}): {p}" for p in _row_problems(record)]
-    dupes = sheet["scene"][sheet["scene"].duplicated()].tolist() if "scene" in sheet else []
-    if dupes:
-        problems.append(f"column 'scene': duplicate scene name(s) {dupes}")
+            found += [f"line {line} (scene {name!r}): {p}" for p in _row_problems(record)]
+        if found and wanted and row.get("scene") not in wanted and not unknown_columns:
+            left_out.append((line, found))
+        else:
+            problems += found
+    if "scene" in sheet:
+        for name in sheet["scene"][sheet["scene"].duplicated()].unique():
+            at = [str(n) for n, s in zip(numbers, sheet["scene"]) if s == name]
+            problems.append(f"column 'scene': {name!r} names the rows of lines {', '.join(at)}; fix: give each row "
+                            "its own scene name (results/<scene>/ and the report pages are named after it)")
     if sheet.empty:
         problems.append("no scene rows")
     if problems:
         lines = "\n".join(f"  - {p}" for p in problems)
         raise WorkflowError(f"invalid scene sheet {sheet_path}:\n{lines}\nfix: correct these cells "
                             f"(schema: {SCHEMAS / 'scenes.schema.yaml'})")
+    for line, found in left_out:
+        sys.stderr.write(f"warning: {sheet_path}: line {line} is left out of this run (not named by 'only'), its "
+                         f"cells are wrong: {'; '.join(p.split(': ', 1)[1] for p in found)}\n")
+    sheet = sheet[~sheet.index.isin([numbers.index(line) for line, _ in left_out])]
     # the schema's defaults fill empty cells and missing columns (snakemake skips empty, i.e. NaN, cells)
     sheet = sheet.replace("", float("nan"))
     validate(sheet, schema=str(SCHEMAS / "scenes.schema.yaml"), set_default=True)
@@ -303,9 +320,14 @@ def _read_scene_sheet(path):
     return sheet.set_index("scene", drop=False)
 
 
+def _wanted_scenes():
+    """The scenes config key 'only' names (comma-separated, spaces allowed), each once, in order."""
+    return list(dict.fromkeys(s.strip() for s in str(config.get("only") or "").split(",") if s.strip()))
+
+
 def _selected_scenes(sheet):
     """Scenes this run builds: config key 'only' (comma-separated, e.g. --config only=kitchen), else all."""
-    wanted = [s for s in str(config.get("only") or "").split(",") if s]
+    wanted = _wanted_scenes()
     unknown = [s for s in wanted if s not in sheet.index]
     if unknown:
         raise WorkflowError(f"config key 'only': scene(s) {unknown} are not in the scene sheet {config['scenes']} "
