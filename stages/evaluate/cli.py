@@ -119,6 +119,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                          max_unseen_renders=args.max_unseen_renders or None,
                          max_locality_pairs=args.max_locality_pairs or None, progress=not args.no_progress)
     run = open_run(args.run, args.device)
+    run.check_dataset(ds)
     extra = {"run": str(args.run), "device": args.device,
              "encoder": getattr(grounder.encoder, "name", None) if grounder else None}
     metrics = evaluate_run(run, ds, args.out, truth, grounder, cfg, extra)

@@ -42,7 +42,7 @@ def build_parser(prog: str = "livescene export") -> argparse.ArgumentParser:
     return p
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     import torch  # after argument parsing: --help stays fast
@@ -60,6 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     combos = [parse_state_string(s, run.objects) for s in args.states]
     run.warn_if_states_unread([name for combo in combos for name in combo])
     dataset = read_scene(dataset_of_run(args.run, args.data), validate=False)
+    run.check_dataset(dataset)
     doc = export_run(run, dataset, combos, args.out, options, progress=not args.no_progress,
                      run_info={"run": str(args.run), "method": run.method, "step": run.step})
     empty = [r["states"] for r in doc["exports"] if r["files"]["scene_mesh"]["vertices"] == 0]
@@ -67,8 +68,12 @@ def main(argv: list[str] | None = None) -> int:
         import warnings
 
         warnings.warn(f"{args.out}: the scene mesh is empty at {len(empty)} of {len(doc['exports'])} state "
-                      f"combinations (e.g. {empty[0]}): the run ({run.step} steps) has no surface dense enough to "
-                      "mesh, as an undertrained run; fix: train it longer (the workflow's 1500 steps)", stacklevel=2)
+                      f"combinations (e.g. {empty[0]}): no surface that two views agree on is dense enough to mesh. "
+                      f"Causes: a run of too few steps (this one: {run.step}; the workflow trains 1500), a "
+                      f"--resolution too fine for the renders (now {args.resolution} voxels at --scale {args.scale}: "
+                      "a voxel smaller than a pixel's footprint is seen by too few views), or a --data that is not "
+                      "the run's dataset; fix: train it longer, or lower --resolution / raise --scale",
+                      stacklevel=2)
     summary = {"out": args.out, "total_seconds": doc["total_seconds"],
                "exports": [{"states": r["states"], "scene_vertices": r["files"]["scene_mesh"]["vertices"],
                             "seconds": r["timings_s"]["total"]} for r in doc["exports"]]}

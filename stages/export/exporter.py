@@ -77,8 +77,10 @@ class ExportOptions:
             raise InputError("--resolution", f"{self.resolution} voxels is outside 16..2048", "use e.g. 256")
         if not 0 < self.prob_threshold < 1:
             raise InputError("--prob-threshold", f"{self.prob_threshold} is not in (0, 1)", "use e.g. 0.5")
-        if self.views < 0:
-            raise InputError("--views", f"{self.views} views", "give 0 (all training poses) or a positive count")
+        if self.views < 0 or self.views == 1:
+            # the fusion keeps a voxel seen by two views at least (min_weight): one view never gives a surface
+            raise InputError("--views", f"{self.views} views", "give 0 (all training poses) or 2 or more: a surface "
+                             "is kept where two views at least agree")
 
 
 def export_box(dataset: SceneDataset, run: Any) -> np.ndarray:
@@ -217,6 +219,9 @@ def export_run(run: Renderable, dataset: SceneDataset, combos: Sequence[Mapping[
             "objects": list(run.objects), "options": asdict(options),
             "views": len(views), "view_frames": [dataset.frames[i].frame_id for i, _, _ in views],
             "render_size": [cam.width, cam.height], "box": box.tolist(), "world_up": up,
+            # the files' unit is the dataset's: metres for a capture's truth, an arbitrary scale for COLMAP's poses
+            # (glTF reads metres, so such a room opens at COLMAP's scale)
+            "units": dataset.meta.get("units"),
             "voxel": float(np.max(box[1] - box[0])) / options.resolution,
             "exports": records, "total_seconds": round(time.perf_counter() - t0, 3),
             "loadavg": [round(x, 2) for x in os.getloadavg()],

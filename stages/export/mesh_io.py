@@ -50,6 +50,18 @@ def points_arrays(points: o3d.geometry.PointCloud) -> dict[str, np.ndarray]:
             "colors": np.asarray(points.colors, dtype=np.float32).reshape(-1, 3)}
 
 
+def srgb_to_linear(colors: np.ndarray) -> np.ndarray:
+    """sRGB-encoded colours in [0, 1] -> linear (IEC 61966-2-1), as glTF defines vertex colours."""
+    c = np.clip(np.asarray(colors, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(colors: np.ndarray) -> np.ndarray:
+    """The inverse of ``srgb_to_linear``."""
+    c = np.clip(np.asarray(colors, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
 def _glb_bytes(arrays: dict[str, np.ndarray], up: str = "+y") -> bytes:
     pos = arrays["positions"]
     n = len(pos)
@@ -82,10 +94,12 @@ def _glb_bytes(arrays: dict[str, np.ndarray], up: str = "+y") -> bytes:
         normals = arrays["normals"] / np.maximum(np.linalg.norm(arrays["normals"], axis=1, keepdims=True), 1e-12)
         attributes["NORMAL"] = add(normals.astype("<f4"), _FLOAT, "VEC3", _ARRAY_BUFFER)
     if len(arrays["colors"]) == n:
-        rgba = np.full((n, 4), 255, np.uint8)
-        rgba[:, :3] = np.clip(arrays["colors"] * 255.0 + 0.5, 0, 255).astype(np.uint8)
-        attributes["COLOR_0"] = add(rgba, _UBYTE, "VEC4", _ARRAY_BUFFER, normalized=True)
-    primitive: dict = {"attributes": attributes, "mode": _POINTS}
+        # glTF's COLOR_0 is linear; the renders are sRGB (as the photos were): converted, and kept as floats so
+        # that dark colours keep their steps
+        attributes["COLOR_0"] = add(srgb_to_linear(arrays["colors"]).astype("<f4"), _FLOAT, "VEC3", _ARRAY_BUFFER)
+    # unlit: the colours already hold the room's light (a radiance field's, as a photo scan's); a viewer without
+    # the extension falls back to a matte, non-metallic surface (glTF's default material is metal)
+    primitive: dict = {"attributes": attributes, "mode": _POINTS, "material": 0}
     tris = arrays["triangles"]
     if len(tris):
         flat = tris.reshape(-1).astype("<u4")
@@ -98,7 +112,10 @@ def _glb_bytes(arrays: dict[str, np.ndarray], up: str = "+y") -> bytes:
     if UP_TO_GLTF_Y[up] is not None:
         node["rotation"] = UP_TO_GLTF_Y[up]
     doc.update({"nodes": [node], "meshes": [{"primitives": [primitive]}], "accessors": accessors,
-                "bufferViews": views, "buffers": [{"byteLength": len(body)}]})
+                "bufferViews": views, "buffers": [{"byteLength": len(body)}],
+                "materials": [{"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
+                               "extensions": {"KHR_materials_unlit": {}}}],
+                "extensionsUsed": ["KHR_materials_unlit"]})
     return _glb_pack(doc, body)
 
 
@@ -153,6 +170,7 @@ def read_glb(path: str | Path) -> dict[str, np.ndarray]:
     colors = accessor(attrs["COLOR_0"])[:, :3] if "COLOR_0" in attrs else np.zeros((0, 3))
     if colors.dtype == np.uint8:
         colors = colors.astype(np.float32) / 255.0
+    colors = linear_to_srgb(colors)  # glTF's colours are linear; returned as the renders were (sRGB)
     tris = accessor(prim["indices"]).reshape(-1, 3) if "indices" in prim else np.zeros((0, 3), np.uint32)
     return {"positions": accessor(attrs["POSITION"]).astype(np.float32), "triangles": tris.astype(np.uint32),
             "colors": colors.astype(np.float32), "mode": np.array(prim.get("mode", _TRIANGLES))}

@@ -53,5 +53,6 @@ def full_state(states: dict[str, float], objects: Sequence[str]) -> dict[str, fl
 
 def state_slug(states: dict[str, float]) -> str:
     """A folder name for one combination: ``cabinet-1_drawer-0`` (names made file-system safe)."""
-    parts = [f"{_SLUG_UNSAFE.sub('-', name)}-{value:g}" for name, value in states.items()]
+    # 12 significant digits: states that differ in the 7th (0.1234567, 0.1234568) are two folders, not a clash
+    parts = [f"{_SLUG_UNSAFE.sub('-', name)}-{value:.12g}" for name, value in states.items()]
     return "_".join(parts) or "no-objects"

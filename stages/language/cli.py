@@ -133,6 +133,7 @@ def _relevancy(args: argparse.Namespace) -> int:
         raise InputError(Path(data) / "mapping.yaml", "the scene names no objects, so a query has none to find",
                          "query a run of a scene with named objects (mapping.yaml)")
     run = open_run(args.run, args.device)
+    run.check_dataset(ds)
     frames = ds.frames_in("test") or ds.frames
     frame = ds.frame_by_id(args.frame) if args.frame else frames[0]
     grounder = Grounder(ObjectVocabulary.from_prompts(ds.objects, ds.prompts, Path(data) / "prompts.yaml"),

@@ -56,6 +56,11 @@ GENERIC_GROUPS = {"door", "doors", "thing", "things", "part", "parts", "object",
 """Group words that name every object when no name contains them ("close all doors")."""
 EVERYTHING_ELSE = {"everything else", "all else", "all other", "all others", "all other objects", "the rest",
                    "rest", "all the others", "the others", "others", "anything else"}
+PRONOUNS = {"it", "them", "this one", "that one", "this", "that", "those", "these"}
+"""Words that refer back to an object: not resolved (name the object again)."""
+_NEGATION = re.compile(r"\b(?:don t|dont|do not|does not|doesn t|never|not)\s+(?:please\s+)?(?:"
+                       + "|".join([*_ALL_VERBS, *FIRST_WORD_VERBS]) + r")\b")
+"""A negated verb ("don't open the fridge"): read as the verb, it would do what it forbids."""
 SLIGHT_AMOUNT = 0.25
 """Openness that "slightly"/"a bit" means for an open command (and 1 - it for a close command)."""
 
@@ -209,6 +214,11 @@ class CommandParser:
         clauses = split_clauses(command)
         if not clauses:
             raise CommandError(source, "empty command", 'say e.g. "open the fridge"')
+        if _NEGATION.search(normalize_phrase(command)):
+            raise CommandError(source, f'"{command}" says what not to do, which commands do not take (read as the '
+                               "verb alone, it would do what it forbids)",
+                               f'say what to do, e.g. "close the {(self.objects or ["fridge"])[0]}", or leave the '
+                               "object out")
         parsed: list[_Clause] = []
         previous: float | None = None
         for raw in clauses:
@@ -223,6 +233,14 @@ class CommandParser:
                 excepted[i] = {self.resolver.resolve(p, command).object for p in clause.excepted}
             if clause.object_phrase in EVERYTHING or clause.object_phrase in EVERYTHING_ELSE:
                 continue
+            if not clause.object_phrase:
+                raise CommandError(source, f'"{clause.text}" in "{command}" names no object',
+                                   f"name one of {self.objects}, or say everything")
+            if clause.object_phrase in PRONOUNS:
+                raise CommandError(source, f'"{clause.object_phrase}" in "{command}" refers back to an object, which '
+                                   "commands do not resolve", f'name the object again, e.g. "close the '
+                                   f'{self.objects[0]} then open the {self.objects[0]}"' if self.objects else
+                                   "name the object again")
             group = self._group(clause.object_phrase, command)
             if group is not None:
                 named[i] = group

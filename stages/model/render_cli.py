@@ -90,6 +90,10 @@ def _write_png(path: Path, img: np.ndarray) -> None:
         raise OSError(f"could not write {path}")
 
 
+MIN_VIDEO_SIDE = 2
+"""Smallest video side: OpenCV's writers refuse a 1-pixel frame, and only after every frame is rendered."""
+
+
 def _made_path_camera(args: argparse.Namespace, camera):
     """The dataset camera at --width/--height (vertical field of view kept), without distortion."""
     w, h = args.width, args.height
@@ -122,6 +126,7 @@ def _video_path(args: argparse.Namespace, run: LoadedRun) -> CameraPath:
             cp.fps = args.fps
         return cp
     ds = read_scene(dataset_of_run(args.run, args.data), validate=False)
+    run.check_dataset(ds)
     train = [f for f in ds.frames if (f.split or "train") == "train"] or ds.frames
     c2ws = [np.asarray(f.c2w, dtype=np.float64) for f in train]
     camera = _made_path_camera(args, ds.camera_of(train[0]))
@@ -149,6 +154,10 @@ def _render_video(args: argparse.Namespace) -> int:
         data = dataset_of_run(args.run, args.data)
     except InputError:  # an orbit needs no dataset: only the run is guarded then
         data = None
+    for name, value in (("--width", args.width), ("--height", args.height)):
+        if value is not None and value < MIN_VIDEO_SIDE:
+            raise InputError(name, f"{value} pixels", f"give at least {MIN_VIDEO_SIDE} (or leave it out: the path's "
+                             "or the dataset's size)")
     guard_output_file(args.out, "the video", suffixes=VIDEO_SUFFIXES, inputs=[args.run, data])
     check_frames_dir(frames_dir)
     check_video_codec(args.out, args.codec)
@@ -168,7 +177,7 @@ def _render_video(args: argparse.Namespace) -> int:
     return 0
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.camera_path or args.orbit or args.states_sweep:
@@ -190,7 +199,9 @@ def main(argv: list[str] | None = None) -> int:
                   "dataset", file=sys.stderr)
     else:
         c2w = _parse_matrix(args.pose_matrix)
-        camera = read_scene(dataset_of_run(args.run, args.data), validate=False).camera
+        ds = read_scene(dataset_of_run(args.run, args.data), validate=False)
+        run.check_dataset(ds)
+        camera = ds.camera
     run.warn_if_states_unread(parse_state_assignments(args.state))
     out = run.render(camera, c2w, parse_state_assignments(args.state) or None, frame_index=frame_index)
     state = run.state_vector(parse_state_assignments(args.state) or None, frame_index)

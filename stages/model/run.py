@@ -74,15 +74,42 @@ class LoadedRun:
     def state_mode(self) -> str:
         return self.config.model.state.mode
 
+    @property
+    def reads_states(self) -> bool:
+        """False for a method whose images are the same at any state vector: K-Planes' fourth axis is the frame's
+        time (docs/baselines.md)."""
+        return self.method != "k-planes"
+
+    STATES_UNREAD = ("a k-planes run reads no object state (its fourth axis is the frame's time), so the states "
+                     "given change nothing")
+
     def warn_if_states_unread(self, states: Collection[str] | Mapping[str, float] | None) -> None:
-        """Say on stderr when object states are asked of a method that reads none: K-Planes' fourth axis is the
-        frame's time (docs/baselines.md), so its images are the same at any state vector."""
-        if self.method == "k-planes" and states:
+        """Say on stderr when object states are asked of a method that reads none."""
+        if not self.reads_states and states:
             import warnings
 
-            warnings.warn(f"{self.run_dir}: a k-planes run reads no object state (its fourth axis is the frame's "
-                          "time), so the states given change nothing; fix: render a run of livescene, mk-planes or "
+            warnings.warn(f"{self.run_dir}: {self.STATES_UNREAD}; fix: render a run of livescene, mk-planes or "
                           "conerf to set object states", stacklevel=2)
+
+    def check_dataset(self, ds: Any) -> None:
+        """Refuse a ``--data`` whose objects are not the run's (a state, mask or name would reach the wrong object),
+        and warn when its cameras are not those the run was trained on (another world frame, such as a capture's
+        ``truth/`` in metres where training had COLMAP's units: every render is then of empty space)."""
+        if list(ds.objects) != self.objects:
+            raise InputError(Path(ds.root) / "mapping.yaml", f"objects {list(ds.objects)} differ from the run's "
+                             f"{self.objects}", "pass the dataset the run was trained on with --data (or leave "
+                             "--data out: the run names its own)")
+        trained = recorded_dataset(self.run_dir)
+        if trained is None or trained.resolve() == Path(ds.root).resolve():
+            return
+        ours, theirs = Path(ds.root) / "transforms.json", trained / "transforms.json"
+        if ours.is_file() and theirs.is_file() and _cameras(ours) != _cameras(theirs):
+            import warnings
+
+            warnings.warn(f"{ds.root}: its cameras differ from those of the dataset this run was trained on "
+                          f"({trained}): renders at its poses, and anything made from them, are of another world "
+                          "frame than the run's; fix: pass the run's own dataset with --data (or leave --data out)",
+                          stacklevel=2)
 
     @property
     def exposure_gains(self) -> dict[str, list[float]] | None:
@@ -252,6 +279,26 @@ def run_dataset_root(run_dir: str | Path) -> Path | None:
     return Path(config.data) if config is not None and config.data else None
 
 
+def _cameras(transforms: Path) -> dict[str, list]:
+    """file path -> camera-to-world of a transforms.json (unreadable: empty, so that nothing is claimed)."""
+    try:
+        frames = json.loads(transforms.read_text()).get("frames", [])
+        return {str(f.get("file_path")): f.get("transform_matrix") for f in frames if isinstance(f, dict)}
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
+def recorded_dataset(run_dir: str | Path) -> Path | None:
+    """The dataset the run was trained on, where it is found (see ``dataset_of_run``); None when the run does not
+    say or it is not there."""
+    found = run_dataset_root(run_dir)
+    if found is None:
+        return None
+    run_dir = Path(run_dir)
+    candidates = [found] if found.is_absolute() else [found, *(parent / found for parent in run_dir.resolve().parents)]
+    return next((c for c in candidates if c.is_dir()), None)
+
+
 def dataset_of_run(run_dir: str | Path, data: str | Path | None = None) -> Path:
     """The dataset to open with a run: ``data`` (--data) when given, else the run's own.
 
@@ -267,10 +314,9 @@ def dataset_of_run(run_dir: str | Path, data: str | Path | None = None) -> Path:
     found = run_dataset_root(run_dir)
     if found is None:
         raise InputError(path, "does not say which dataset the run was trained on", "pass --data DS")
-    candidates = [found] if found.is_absolute() else [found, *(parent / found for parent in run_dir.resolve().parents)]
-    for candidate in candidates:
-        if candidate.is_dir():
-            return candidate
+    located = recorded_dataset(run_dir)
+    if located is not None:
+        return located
     raise InputError(path, f"names the dataset {found}, which is not there from {Path.cwd()} (nor relative to the "
                      "run folder's parents)", "pass --data DS (the dataset the run was trained on), or start from "
                      "the folder the run was trained in")

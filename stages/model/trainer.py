@@ -90,7 +90,11 @@ def resolve_device(name: str | torch.device) -> torch.device:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise InputError("--device", "CUDA requested but torch sees no GPU", "use --device cpu or auto")
-    return torch.device(name)
+    try:
+        return torch.device(name)
+    except RuntimeError as exc:  # torch's message lists every device type it knows
+        raise InputError("--device", f"{name!r} is not a device", "use --device cpu, cuda (cuda:1, ...) or auto") \
+            from exc
 
 
 def autocast_dtype(setting: str, device: torch.device) -> torch.dtype | None:

@@ -15,11 +15,14 @@ and keeps its traceback: the wrapper never catches it.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import re
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ParamSpec
@@ -67,11 +70,40 @@ class ErrorExit:
     """Put before the exception's text, after ``error: ``."""
 
 
-def cli_errors(*also: type[Exception] | ErrorExit) -> Callable[[Callable[P, int]], Callable[P, int]]:
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a scheduler, or Snakemake cancelling a job), raised where the program is, so that an atomic write
+    unwinds as after Ctrl-C: with the default action the process dies at once and leaves its hidden temporary."""
+
+
+EXIT_TERMINATED = 143
+"""Exit status after SIGTERM (128 + 15)."""
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside, SIGTERM raises ``Terminated`` (main thread, default action only). Only for commands whose
+    work returns to Python often (torch ops): a handler waits for a long C call to return, where the default
+    action would not (COLMAP's mapping is left to it)."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        yield
+        return
+
+    def raise_terminated(_signum: int, _frame: object) -> None:
+        raise Terminated
+
+    signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def cli_errors(*also: type[Exception] | ErrorExit,
+               sigterm: bool = False) -> Callable[[Callable[P, int]], Callable[P, int]]:
     """Decorate a CLI ``main``: ``InputError`` (and each of ``also``) -> ``error: ...`` on stderr and its code.
 
     The first matching entry wins, ``InputError`` first. A ``KeyError`` prints its message without the
-    quotes ``str(KeyError)`` adds.
+    quotes ``str(KeyError)`` adds. ``sigterm``: SIGTERM unwinds as Ctrl-C does (``sigterm_as_interrupt``).
     """
     exits = [ErrorExit(InputError), *(a if isinstance(a, ErrorExit) else ErrorExit(a) for a in also)]
     for e in exits:
@@ -83,15 +115,17 @@ def cli_errors(*also: type[Exception] | ErrorExit) -> Callable[[Callable[P, int]
         @functools.wraps(main)
         def run(*args: P.args, **kwargs: P.kwargs) -> int:
             try:
-                return main(*args, **kwargs)
+                with sigterm_as_interrupt() if sigterm else contextlib.nullcontext():
+                    return main(*args, **kwargs)
             except kinds as exc:
                 rule = next(e for e in exits if isinstance(exc, e.kind))
                 print(f"error: {rule.prefix}{message(exc)}", file=sys.stderr)
                 return rule.code
-            except KeyboardInterrupt:  # Ctrl-C: outputs are written atomically, so nothing half-written is left
-                print("interrupted: this command's output was not written (an earlier one is kept as it was); run "
+            except KeyboardInterrupt as exc:  # Ctrl-C: outputs are written atomically, nothing half-written is left
+                what = "terminated" if isinstance(exc, Terminated) else "interrupted"
+                print(f"{what}: this command's output was not written (an earlier one is kept as it was); run "
                       "it again to redo the work", file=sys.stderr)
-                return EXIT_INTERRUPTED
+                return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
             except OSError as exc:
                 if exc.errno not in SYSTEM_FIXES:
                     raise

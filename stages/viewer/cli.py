@@ -60,6 +60,28 @@ def build_parser(prog: str = "livescene view") -> argparse.ArgumentParser:
     return p
 
 
+def check_address(host: str, port: int) -> None:
+    """Refuse a port out of range or a host this machine cannot serve on: viser takes any socket error for a busy
+    port and tries the next one without end, so the viewer would hang without a word."""
+    import socket
+
+    if not 0 <= port <= 65535:
+        raise InputError("--port", f"{port} is not a port", "give a port from 1 to 65535, e.g. 8080 (0: any free one)")
+    try:
+        infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise InputError("--host", f"{host!r} is not an address of this machine ({exc})",
+                         "give 127.0.0.1 (this machine only) or 0.0.0.0 (every network interface)") from exc
+    family, _, _, _, address = infos[0]
+    try:
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.bind((address[0], 0))  # any free port: only whether this machine has the address is asked
+    except OSError as exc:
+        raise InputError("--host", f"cannot serve on {host!r} ({exc.strerror or exc})",
+                         "give 127.0.0.1 (this machine only), 0.0.0.0 (every network interface) or an address of "
+                         "one of this machine's interfaces") from exc
+
+
 def build_viewer(args: argparse.Namespace) -> Any:
     """Load the run and its dataset and start the viewer (``LiveViewer``) as ``args`` say."""
     import numpy as np
@@ -82,6 +104,7 @@ def build_viewer(args: argparse.Namespace) -> Any:
     for flag, value in (("--frame-budget", args.frame_budget), ("--settle", args.settle)):
         if not value > 0:
             raise InputError(flag, f"{value} seconds", "give a positive number of seconds")
+    check_address(args.host, args.port)
     run = open_run(args.run, args.device)
     data = dataset_of_run(args.run, args.data)
     ds = read_scene(data)

@@ -82,9 +82,7 @@ class LiveViewer:
         self.language = language
         self.options = options or ViewerOptions()
         self.objects: list[str] = list(run.objects)
-        if list(dataset.objects) != self.objects:
-            raise InputError(dataset.root / "mapping.yaml", f"objects {list(dataset.objects)} differ from the run's "
-                             f"{self.objects}", "pass the dataset the run was trained on with --data")
+        run.check_dataset(dataset)
         self._lock = threading.RLock()
         self._quiet = threading.local()
         self._sessions: dict[int, ClientSession] = {}
@@ -166,6 +164,8 @@ class LiveViewer:
         self.sliders: dict[str, Any] = {}
         ranges = self.dataset.state_ranges()
         with gui.add_folder("Object states"):
+            self.states_note = gui.add_markdown(
+                "" if self.reads_states else f"**Not controllable:** {self.run.STATES_UNREAD}.")
             for name in self.objects:
                 slider = gui.add_slider(name, min=0.0, max=1.0, step=0.01, initial_value=round(self._states[name], 2),
                                         hint=slider_hint(name, ranges.get(name)))
@@ -186,6 +186,11 @@ class LiveViewer:
             cameras = gui.add_checkbox("Training cameras", initial_value=True)
             cameras.on_update(lambda _event: self._show_cameras(bool(cameras.value)))
             self.render_status = gui.add_markdown("")
+
+    @property
+    def reads_states(self) -> bool:
+        """Whether the run's images follow the sliders (``LoadedRun.reads_states``)."""
+        return bool(getattr(self.run, "reads_states", True))
 
     def _show_cameras(self, visible: bool) -> None:
         for handle in self.frustums.values():
@@ -251,7 +256,8 @@ class LiveViewer:
             self.language_status.content = f"**Not applied:** {exc.problem}. *Fix:* {exc.fix}"
             return
         moved = ", ".join(f"{a.object} -> {a.value:.2f} ({a.method})" for a in result.actions)
-        self.language_status.content = f"*{text}*: {moved}"
+        unread = "" if self.reads_states else f" (the image does not change: {self.run.STATES_UNREAD})"
+        self.language_status.content = f"*{text}*: {moved}{unread}"
 
     def show_relevancy(self, query: str, source: str | None = None) -> None:
         """Show the relevancy map of ``query`` instead of colour (loads the text encoder the first time)."""

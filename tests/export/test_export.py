@@ -148,7 +148,7 @@ def test_cli_exports_a_real_run_in_each_format(tiny_trained_run, tiny_capture_da
         assert np.all(verts >= box[0] - 1e-4) and np.all(verts <= box[1] + 1e-4)
         assert (out / record["thumbnail"]).is_file()
     for fmt in ("ply", "glb"):
-        assert export_main(["--run", str(tiny_trained_run), "--format", fmt, "--views", "1", "--scale", "0.25",
+        assert export_main(["--run", str(tiny_trained_run), "--format", fmt, "--views", "2", "--scale", "0.25",
                             "--out", str(tmp_path / fmt), "--no-progress"]) == 0
         assert (tmp_path / fmt / "cabinet-0_drawer-0" / f"scene_mesh.{fmt}").is_file()
 
@@ -205,6 +205,16 @@ def test_mesh_formats_round_trip(tmp_path):
     glb = read_glb(tmp_path / "box.glb")
     assert np.allclose(glb["positions"], verts) and np.array_equal(glb["triangles"], tris)
     assert np.allclose(glb["colors"], np.asarray(mesh.vertex_colors), atol=1 / 255)
+    # as glTF defines them: linear vertex colours, and an unlit (else matte) material, not the spec's default metal
+    doc = _glb_json(tmp_path / "box.glb")
+    assert doc["materials"][0]["pbrMetallicRoughness"]["metallicFactor"] == 0.0
+    assert "KHR_materials_unlit" in doc["materials"][0]["extensions"]
+    assert doc["meshes"][0]["primitives"][0]["material"] == 0
+    grey = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(verts[:1]))
+    grey.colors = o3d.utility.Vector3dVector(np.full((1, 3), 0.5))
+    write_geometry(tmp_path / "grey.glb", grey)
+    assert np.allclose(read_glb(tmp_path / "grey.glb")["colors"], 0.5, atol=1e-6)
+    assert _glb_color_accessor(tmp_path / "grey.glb") == pytest.approx([0.21404, 0.21404, 0.21404], abs=1e-5)
     trimesh = pytest.importorskip("trimesh")  # an independent glTF reader, where installed
     loaded = trimesh.load(tmp_path / "box.glb", force="mesh")
     assert np.allclose(np.sort(loaded.vertices, axis=0), np.sort(verts, axis=0))
@@ -212,6 +222,13 @@ def test_mesh_formats_round_trip(tmp_path):
     write_geometry(tmp_path / "points.glb", points)
     assert read_glb(tmp_path / "points.glb")["mode"] == 0
     assert Path(tmp_path / "points.glb").stat().st_size > 96
+
+
+def test_combinations_that_differ_in_the_seventh_digit_get_folders_of_their_own():
+    from stages.export.state_spec import state_slug
+
+    assert state_slug({"cabinet": 1.0, "drawer": 0.0}) == "cabinet-1_drawer-0"  # the usual names are unchanged
+    assert state_slug({"cabinet": 0.1234567}) != state_slug({"cabinet": 0.1234568})
 
 
 def test_all_sets_every_object_the_string_does_not_name():
@@ -244,8 +261,64 @@ def test_an_empty_mesh_and_states_a_method_cannot_read_are_said(tiny_capture_dat
     config = load_config("cpu-demo", overrides, method="k-planes", data=str(tiny_capture_dataset[1].root), seed=0)
     Trainer(config, run, device="cpu", progress=False).train()
     with pytest.warns(UserWarning) as said:
-        assert export_main(["--run", str(run), "--states", "cabinet=1", "--views", "1", "--scale", "0.25",
+        assert export_main(["--run", str(run), "--states", "cabinet=1", "--views", "2", "--scale", "0.25",
                             "--out", str(tmp_path / "out"), "--no-progress"]) == 0
     messages = " | ".join(str(w.message) for w in said)
     assert "a k-planes run reads no object state" in messages
     assert "the scene mesh is empty at 1 of 1 state combinations" in messages and "train it longer" in messages
+    assert "a run of too few steps (this one: 2" in messages and "--resolution too fine" in messages
+    # one view can never give a surface (the fusion keeps voxels two views agree on): refused, not "undertrained"
+    assert export_main(["--run", str(run), "--views", "1", "--out", str(tmp_path / "one"), "--no-progress"]) == 2
+    assert "--views: 1 views; fix: give 0 (all training poses) or 2 or more" in capsys.readouterr().err
+
+
+def test_a_dataset_that_is_not_the_runs_is_refused_or_named(tiny_trained_run, tiny_capture_dataset, tmp_path,
+                                                            capsys):
+    """Another dataset's objects would take the run's states and masks; another world frame (a capture's truth/
+    where training had COLMAP's units) renders empty space: refused, and warned of."""
+    import json
+    import shutil
+    import warnings
+
+    from stages.model import load_run
+    from stages.scene import read_scene
+
+    root = tiny_capture_dataset[1].root
+    renamed = tmp_path / "renamed"
+    shutil.copytree(root, renamed)
+    for name in ("mapping.yaml", "key_frame_value.yaml"):
+        (renamed / name).write_text((renamed / name).read_text().replace("cabinet", "fridge"))
+    assert export_main(["--run", str(tiny_trained_run), "--data", str(renamed), "--out", str(tmp_path / "a"),
+                        "--no-progress"]) == 2
+    assert "differ from the run's" in capsys.readouterr().err and not (tmp_path / "a").exists()
+    moved = tmp_path / "moved"
+    shutil.copytree(root, moved)
+    transforms = json.loads((moved / "transforms.json").read_text())
+    for frame in transforms["frames"]:
+        frame["transform_matrix"][0][3] += 1.0  # the same room, another origin
+    (moved / "transforms.json").write_text(json.dumps(transforms))
+    with pytest.warns(UserWarning, match=r"its cameras differ from those of the dataset this run was trained on"):
+        export_main(["--run", str(tiny_trained_run), "--data", str(moved), "--views", "2", "--scale", "0.25",
+                     "--resolution", "32", "--out", str(tmp_path / "b"), "--no-progress"])
+    copy = tmp_path / "copy"  # a copy of the run's own dataset is the run's dataset: nothing to say
+    shutil.copytree(root, copy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        load_run(tiny_trained_run).check_dataset(read_scene(copy))
+
+
+def _glb_json(path: Path) -> dict:
+    data = path.read_bytes()
+    size = int.from_bytes(data[12:16], "little")
+    return json.loads(data[20:20 + size])
+
+
+def _glb_color_accessor(path: Path) -> list[float]:
+    """The first vertex colour as stored in the file (linear)."""
+    data = path.read_bytes()
+    doc = _glb_json(path)
+    size = int.from_bytes(data[12:16], "little")
+    body = data[20 + size + 8:]
+    acc = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"]]
+    view = doc["bufferViews"][acc["bufferView"]]
+    return np.frombuffer(body, "<f4", 3, view["byteOffset"]).tolist()

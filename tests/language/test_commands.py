@@ -69,7 +69,12 @@ SUCCEEDS = [
 
 FAILS = [
     ("open the toaster", UnknownObjectError, r'unknown object "toaster".*fridge \(spelling \d\.\d\d, cosine'),
-    ("open it", UnknownObjectError, r'unknown object "it"'),
+    ("open it", CommandError, r'"it" in "open it" refers back to an object'),
+    ("close the fridge then open it", CommandError, r"refers back to an object.*name the object again"),
+    # a negation read as its verb did what it forbids ("don't open the fridge" opened it)
+    ("don't open the fridge", CommandError, r"says what not to do"),
+    ("do not close the drawer", CommandError, r"says what not to do"),
+    ("close", CommandError, r'"close" in "close" names no object'),
     ("open the cabinet", AmbiguousObjectError,
      r'ambiguous object "cabinet".*(upper_cabinet|lower_cabinet) \(1\.00\).*(lower_cabinet|upper_cabinet) \(1\.00\)'),
     ("close the cupboard", AmbiguousObjectError, r"ambiguous object \"cupboard\".*lower_cabinet.*upper_cabinet"),

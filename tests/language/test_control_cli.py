@@ -29,6 +29,9 @@ class _FakeRun:
     def warn_if_states_unread(self, states):  # a method that reads states
         pass
 
+    def check_dataset(self, ds):  # the dataset it was trained on
+        pass
+
     def frame_index_of(self, frame, ds_frames):  # by id where the run records ids, as LoadedRun
         ids = self.frame_ids or [f.frame_id for f in ds_frames]
         return ids.index(frame.frame_id) if frame.frame_id in ids else None

@@ -185,3 +185,11 @@ def test_orbit_and_state_sweep_shortcuts(trained_run, tmp_path, monkeypatch, cap
     bad = ["--run", str(trained_run), "--orbit", "--state", "object0=2", "--out", str(tmp_path / "y.mp4")]
     assert render_main(bad) == 2
     assert "'object0=2': state 2 is not in [0, 1]" in capsys.readouterr().err
+    # sizes and devices that crashed with a traceback (or after rendering every frame) are refused first
+    for size, flag in ((["--width", "0"], "--width: 0 pixels"), (["--width", "-5", "--height", "10"], "--width: -5"),
+                       (["--width", "1", "--height", "1"], "--width: 1 pixels; fix: give at least 2")):
+        assert render_main(["--run", str(trained_run), "--orbit", *size, "--out", str(tmp_path / "z.mp4")]) == 2
+        assert flag in capsys.readouterr().err
+    assert not calls[3:] and not (tmp_path / "z.mp4").exists()
+    assert render_main(["--run", str(trained_run), "--orbit", "--device", "gpu", "--out", str(tmp_path / "z.mp4")]) == 2
+    assert "--device: 'gpu' is not a device; fix: use --device cpu, cuda" in capsys.readouterr().err

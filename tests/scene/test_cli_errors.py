@@ -104,3 +104,26 @@ def test_a_full_disk_or_a_read_only_folder_is_said_with_the_output_it_was_for(ca
     assert capsys.readouterr().err.startswith("error: ro/metrics.json: Permission denied; fix: choose an --out in")
     with pytest.raises(FileNotFoundError):  # any other OSError is a bug's or a crash's: its traceback stays
         failing(errno.ENOENT, "x")()
+
+
+def test_sigterm_unwinds_an_atomic_write_where_asked(tmp_path, capsys):
+    """A cancelled workflow job gets SIGTERM: a command that asks for it cleans up its hidden temporary as after
+    Ctrl-C (with the default action the process died and left it until the next run)."""
+    import signal
+
+    from stages.scene import atomic_dir
+    from stages.scene.cli_errors import EXIT_TERMINATED
+
+    out = tmp_path / "export"
+
+    @cli_errors(sigterm=True)
+    def main() -> int:
+        with atomic_dir(out, "export") as tmp:
+            (tmp / "half.ply").write_text("partial")
+            os.kill(os.getpid(), signal.SIGTERM)
+        return 0
+
+    assert main() == EXIT_TERMINATED
+    assert "terminated: this command's output was not written" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # neither the output nor its temporary
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # the default action is back afterwards

@@ -29,6 +29,11 @@ def test_without_viser_the_error_gives_the_pip_command(monkeypatch, capsys, view
     (["--resolution", "big"], r"--resolution: 'big' is not WIDTHxHEIGHT; fix: write e.g. --resolution 128x96"),
     (["--frame-budget", "0"], r"--frame-budget: 0.0 seconds; fix: give a positive number"),
     (["--threads", "0"], r"--threads: 0 threads; fix: give 1 or more"),
+    # viser takes any socket error for a busy port and tries the next one without end: these hung without a word
+    (["--port", "70000"], r"--port: 70000 is not a port; fix: give a port from 1 to 65535"),
+    (["--port", "-1"], r"--port: -1 is not a port"),
+    (["--host", "256.1.1.1"], r"--host: '256.1.1.1' is not an address of this machine"),
+    (["--host", "192.0.2.1"], r"--host: cannot serve on '192.0.2.1' .*fix: give 127.0.0.1"),  # TEST-NET: not ours
 ])
 def test_bad_options_are_refused(args, message, capsys, viewer_scene):
     pytest.importorskip("viser")
@@ -81,3 +86,30 @@ def test_slider_hint_names_a_range_the_training_frames_do_not_span():
     assert slider_hint("drawer", [0.0, 0.5]).endswith("the training frames show 0.00 to 0.50 (beyond, the render "
                                                       "extrapolates)")
     assert spans_closed_to_open([0.1, 0.9]) and not spans_closed_to_open([0.2, 1.0])
+
+
+def test_a_run_that_reads_no_state_says_so_beside_its_sliders(viewer_scene):
+    """A k-planes run's images are the same at any state: its sliders and commands must not look as if they work."""
+    pytest.importorskip("viser")
+    from stages.language.vocabulary import ObjectVocabulary
+    from stages.model.run import LoadedRun
+    from stages.viewer.language_controls import LanguageControls
+    from stages.viewer.server import LiveViewer, ViewerOptions
+
+    class TimeOnly:  # the tiny run, seen as a k-planes run (its fourth axis the frame's time)
+        reads_states = False
+        STATES_UNREAD = LoadedRun.STATES_UNREAD
+
+        def __getattr__(self, name):
+            return getattr(viewer_scene.run, name)
+
+    ds = viewer_scene.dataset
+    language = LanguageControls(ObjectVocabulary.from_prompts(ds.objects, ds.prompts), None)
+    viewer = LiveViewer(TimeOnly(), ds, language, ViewerOptions(port=0, full_pixels=32 * 24, verbose=False))
+    try:
+        assert "Not controllable:** a k-planes run reads no object state" in viewer.states_note.content
+        viewer._run_command(f"open the {viewer_scene.visible}")
+        assert f"{viewer_scene.visible} -> 1.00" in viewer.language_status.content
+        assert "the image does not change: a k-planes run reads no object state" in viewer.language_status.content
+    finally:
+        viewer.stop()
