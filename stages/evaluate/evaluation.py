@@ -398,7 +398,7 @@ class Evaluator:
     # -- 3. grounding ---------------------------------------------------------------------------------------
     def grounding(self, rendered: list[tuple[Frame, dict[str, np.ndarray]]], out_dir: Path | None) -> dict[str, Any]:
         if self.grounder is None:
-            return {"status": "skipped: no text encoder"}
+            return {"status": "skipped: --no-grounding (the workflow passes it for a scene without names)"}
         truth_masks = self._grounding_masks([f for f, _ in rendered])
         if truth_masks is None:
             return {"status": "skipped: the dataset has no masks and no truth capture was given"}

@@ -234,6 +234,7 @@ def test_only_novel_combinations_are_rendered(eval_scene, tmp_path):
     # nearest training state, counts as observed here: observed_within=None)
     cfg = EvaluateConfig(unseen_views=2, novelty_min=0.4, save_renders=False, locality_views=0, observed_within=None)
     metrics = evaluate_run(run, ds, tmp_path / "e", truth, None, cfg)
+    assert metrics["grounding"]["status"].startswith("skipped: --no-grounding")  # why, as the user asked it
     unseen = metrics["unseen_combinations"]
     combos = {tuple(c["values"]): c["unseen"] for c in unseen["combinations"]}
     assert combos == {(0.0, 1.0): True, (0.5, 0.0): False, (1.0, 0.0): True, (0.0, 0.5): False}
