@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from stages.scene import InputError
@@ -99,8 +100,10 @@ def _query(args: argparse.Namespace) -> int:
     from .object_resolution import CommandError, ObjectResolver
     from .vocabulary import ObjectVocabulary, normalize_phrase
 
-    resolver = ObjectResolver(ObjectVocabulary.from_dataset(args.data), encoder_from_args(args))
     phrase = normalize_phrase(args.phrase)
+    if not phrase:
+        raise InputError(Path("PHRASE"), "the phrase is empty (or holds no word)", 'give a phrase, e.g. "fridge"')
+    resolver = ObjectResolver(ObjectVocabulary.from_dataset(args.data), encoder_from_args(args))
     out: dict = {"phrase": args.phrase, "spelling": resolver.fuzzy_scores(phrase),
                  "embedding": {n: {"cosine": s, "probability": p, "relevancy": r}
                                for n, (s, p, r) in resolver.embedding_scores(phrase).items()}}
@@ -143,6 +146,11 @@ def _relevancy(args: argparse.Namespace) -> int:
         if "language" not in out:
             raise InputError(args.run, "this run renders no language embedding",
                              "use --source probs, or train with language targets")
+        trained = getattr(run, "language_encoder", None)
+        if trained not in (None, grounder.encoder.name):  # a query must live in the space the table was trained in
+            raise InputError(args.run, f"its language table was trained with encoder {trained!r}, and the query is "
+                             f"embedded with {grounder.encoder.name!r}",
+                             "pass the --encoder / --encoder-path the targets were built with, or use --source probs")
         rel = (grounder.relevancy_from_language(out["language"], args.query) if args.source == "language"
                else grounder.relevancy_from_language_objects(out["language"], args.query))
     else:
@@ -150,9 +158,17 @@ def _relevancy(args: argparse.Namespace) -> int:
     with atomic_path(args.out, suffix=".png") as tmp:
         if not cv2.imwrite(str(tmp), np.clip(rel * 255 + 0.5, 0, 255).astype(np.uint8)):
             raise OSError(f"could not write {args.out}")
+    from .object_resolution import ResolverConfig
+
+    match = grounder.query_match(args.query)
+    if match["object"] is None:
+        print(f'note: "{args.query}" names no object of the scene (best cosine {match["best_cosine"]:.2f} < '
+              f"{ResolverConfig().embedding_min_similarity}): the map spreads it over the objects by meaning, so it "
+              "shows the nearest object, not a match", file=sys.stderr)
     print(json.dumps({"query": args.query, "frame": frame.frame_id, "source": args.source, "out": args.out,
-                      "mean_relevancy": float(rel.mean()), "fraction_above_0.5": float((rel > 0.5).mean())},
-                     ensure_ascii=False))
+                      "mean_relevancy": float(rel.mean()), "fraction_above_0.5": float((rel > 0.5).mean()),
+                      "matched_object": match["object"], "matched_by": match["by"],
+                      "object_weights": match["weights"]}, ensure_ascii=False))
     return 0
 
 

