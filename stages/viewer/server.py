@@ -280,7 +280,10 @@ class LiveViewer:
         except InputError as exc:
             self.language_status.content = f"**No map:** {exc.problem}. *Fix:* {exc.fix}"
             return
-        self.language_status.content = f"Relevancy of *{query}* ({self._source}): blue 0 .. red 1."
+        match = self.language.grounder().query_match(query)
+        nothing = "" if match["object"] else (" It names no object of the scene, so the map shows the object "
+                                              "nearest in meaning, not a match.")
+        self.language_status.content = f"Relevancy of *{query}* ({self._source}): blue 0 .. red 1.{nothing}"
 
     def show_colour(self) -> None:
         with self._lock:

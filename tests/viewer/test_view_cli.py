@@ -113,3 +113,12 @@ def test_a_run_that_reads_no_state_says_so_beside_its_sliders(viewer_scene):
         assert "the image does not change: a k-planes run reads no object state" in viewer.language_status.content
     finally:
         viewer.stop()
+
+
+def test_a_relevancy_query_that_names_nothing_says_so(live_viewer, viewer_scene):
+    """The map of a query always lights up some object (a softmax): the status line says when it names none."""
+    live_viewer._show_relevancy("xyzzy qwerty")
+    assert "names no object of the scene" in live_viewer.language_status.content
+    live_viewer._show_relevancy(viewer_scene.visible)
+    assert "names no object" not in live_viewer.language_status.content
+    live_viewer.show_colour()
