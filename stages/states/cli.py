@@ -30,7 +30,8 @@ def build_parser(prog: str = "livescene states") -> argparse.ArgumentParser:
                    help="name table {id: name} (mapping.yaml, or CoNeRF mapping.yml): the scene's objects; "
                         "annotations naming others, or objects never annotated, are errors")
     p.add_argument("--allow-missing-frames", action="store_true",
-                   help="use key frames on source frames that were not extracted (interpolation only)")
+                   help="use key frames on frames beyond the source's end (interpolation only); a key frame on a "
+                        "frame the frames stage left out needs no flag")
     p.add_argument("--out", required=True, type=Path, help="STATES folder to write")
     return p
 

@@ -49,7 +49,8 @@ class StatesConfig:
     mapping: Path | None = None
     """Name table {id: name}: the objects the scene has (unknown and never-annotated objects are errors)."""
     allow_missing_frames: bool = False
-    """Use key frames on source frames that were not extracted (for interpolation only) instead of failing."""
+    """Use key frames on frames the source does not have (beyond its end; for interpolation only) instead of
+    failing; a key frame on a source frame that was not extracted is used without it."""
 
 
 def load_objects(config: StatesConfig, annotations: Annotations) -> list[str] | None:
