@@ -557,6 +557,7 @@ class Trainer:
         flat = torch.cat([torch.cat([p.values, p.terms_ok.float(), p.grads_ok.float()]) for p in pending])
         flat = flat.cpu().tolist()
         results: list[dict[str, float] | None] = []
+        diverged: str | None = None
         at = 0
         for p in pending:
             n_v, n_t, n_g = len(p.values), len(p.names), len(p.grad_names)
@@ -578,9 +579,15 @@ class Trainer:
             self.nonfinite_streak += 1
             results.append(None)
             tqdm.write(f"step {p.step}: skipped ({why}); {self.nonfinite_streak} in a row", file=sys.stderr)
-            if self.nonfinite_streak >= self.config.train.max_nonfinite:
-                raise TrainingDiverged(f"{self.nonfinite_streak} consecutive steps with {why}; stopped at step "
-                                       f"{p.step} without saving (the last checkpoint is the last finite state)")
+            if diverged is None and self.nonfinite_streak >= self.config.train.max_nonfinite:
+                diverged = (f"{self.nonfinite_streak} consecutive steps with {why} (steps "
+                            f"{p.step - self.nonfinite_streak + 1}-{p.step})")
+        if diverged is not None:
+            # the flags are read once per log interval (no sync per step), so the steps queued after the limit
+            # ran too: the message names the last one, where training really stopped
+            raise TrainingDiverged(f"{diverged}; training stopped after step {pending[-1].step} (the steps' "
+                                   "finite flags are read once per log interval) without saving (the last "
+                                   "checkpoint is the last finite state)")
         return results
 
     @torch.no_grad()

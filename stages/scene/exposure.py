@@ -49,6 +49,9 @@ MIN_CORRELATION = 0.8
 that are not the same surfaces (frames that do not overlap, an unordered collection)."""
 CLIP = (8, 247)
 """8-bit values outside this range may be clipped in either frame: their ratio is not the gain's."""
+MAX_LOG_GAIN = 10.0
+"""Largest |log gain| a saved estimate may hold (a factor of 22000, 14 stops): beyond it, or NaN, the file is
+corrupt, and training would clip that frame's channel to black or white without a word."""
 MASK_MARGIN_PX = 2
 """Object masks are grown by this many pixels (at the compared size) before their pixels are left out: a
 propagated mask's edge is a pixel or two off, and an object's border mixes it with the room."""
@@ -137,7 +140,9 @@ def pair_log_ratio(a: np.ndarray, b: np.ndarray, flow: cv2.DISOpticalFlow, stati
         ok &= static_b[np.clip(np.rint(my), 0, h - 1).astype(np.intp), np.clip(np.rint(mx), 0, w - 1).astype(np.intp)]
     if int(ok.sum()) < MIN_PIXELS:
         return None
-    if np.corrcoef(ga[ok].astype(np.float64), cv2.cvtColor(b_on_a, cv2.COLOR_RGB2GRAY)[ok])[0, 1] < MIN_CORRELATION:
+    with np.errstate(invalid="ignore", divide="ignore"):  # a flat region: no variance, correlation NaN
+        r = np.corrcoef(ga[ok].astype(np.float64), cv2.cvtColor(b_on_a, cv2.COLOR_RGB2GRAY)[ok])[0, 1]
+    if not r >= MIN_CORRELATION:  # NaN too: two flat frames show nothing to match, whatever their brightness
         return None
     return central_value(np.log(b_on_a[ok].astype(np.float64)) - np.log(a[ok].astype(np.float64)))
 
@@ -251,6 +256,12 @@ def read_exposure(path: str | Path, ds: SceneDataset) -> ExposureEstimate:
         raise InputError(path, "no such exposure file", remeasure) from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(path, f"not an exposure estimate ({type(exc).__name__}: {exc})", remeasure) from None
+    bad = np.argwhere(~(np.abs(log_gains) <= MAX_LOG_GAIN))  # NaN and inf fail the comparison too
+    if len(bad):
+        frame, channel = ids[bad[0][0]], "RGB"[bad[0][1]]
+        raise InputError(path, f"the log gain of frame {frame} ({channel}) is {log_gains[tuple(bad[0])]!r}, not a "
+                         f"finite number within +-{MAX_LOG_GAIN:g} (a factor of e^{MAX_LOG_GAIN:g} no camera's "
+                         f"exposure moves within one video; {len(bad)} such value(s))", remeasure)
     order = [f.frame_id for f in playback_order(ds)]
     if ids != order:
         missing, extra = sorted(set(order) - set(ids)), sorted(set(ids) - set(order))

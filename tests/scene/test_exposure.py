@@ -188,3 +188,28 @@ def test_a_pair_reads_the_same_ratio_wherever_its_arrays_lie_in_memory():
         held.append(np.empty(24 * k + 8, np.uint8))  # moves where the next arrays are allocated
         seen.add(tuple(pair_log_ratio(a, b, flow).tolist()))
     assert len(seen) == 1
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -200.0])
+def test_a_saved_estimate_with_a_non_finite_or_absurd_gain_is_refused(tmp_path, value):
+    """json writes NaN and Infinity; training would turn such a gain into a black or white channel of that frame
+    (ray_dataset's uint8 clip) without a word: the file is refused, naming the frame and the fix."""
+    ds = write_pan_dataset(tmp_path / "ds", np.random.default_rng(11).normal(0.0, 0.05, (6, 3)))
+    saved = tmp_path / "exposure.json"
+    assert scene_main(["exposure", str(ds.root), "--out", str(saved)]) == 0
+    data = json.loads(saved.read_text())
+    data["log_gains"]["00002"][2] = value
+    saved.write_text(json.dumps(data))
+    with pytest.raises(InputError, match=r"exposure.json: the log gain of frame 00002 \(B\) is .*fix: measure them "
+                                         r"again: livescene scene exposure"):
+        read_exposure(saved, ds)
+
+
+def test_flat_frames_do_not_count_as_overlapping():
+    """Two featureless frames correlate as NaN (no variance); they share nothing to match, so no ratio is read
+    from their brightness difference."""
+    import cv2
+
+    flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    a, b = np.full((64, 96, 3), 100, np.uint8), np.full((64, 96, 3), 160, np.uint8)
+    assert pair_log_ratio(a, b, flow) is None

@@ -7,6 +7,7 @@ import contextlib
 import hashlib
 import io
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -45,17 +46,24 @@ def _params(model: torch.nn.Module) -> dict[str, torch.Tensor]:
     return {k: v.detach().clone() for k, v in model.state_dict().items()}
 
 
+def _optimizer_state(optimizer: torch.optim.Optimizer) -> dict[str, torch.Tensor]:
+    """Every tensor of the optimiser's state (Adam: step, exp_avg, exp_avg_sq per parameter), copied."""
+    state = optimizer.state_dict()["state"]
+    return {f"{i}.{k}": torch.as_tensor(v).detach().clone() for i, s in state.items() for k, v in s.items()}
+
+
 def test_nonfinite_loss_skipped(ctx: CaseContext, dataset: Path, outcome: Outcome) -> None:
     """a NaN loss term skips the step without touching the weights or the optimiser, the log line names the term
     and the step, the streak resets after a good step and training goes on to a finite model"""
     trainer = make_trainer(dataset, ctx.folder("guard-loss"), steps=8)
     _poison_loss(trainer, "focal_mask", {3, 4})
     log = io.StringIO()
-    skipped, before_skip = [], None
+    skipped, before_skip, optimizer_before, optimizer_checked = [], None, {}, 0
     with contextlib.redirect_stderr(log):
         for _ in range(8):
             if trainer.step == 3:
                 before_skip = _params(trainer.model)
+                optimizer_before = _optimizer_state(trainer.optimizer)
             trainer.train_step()
             result = trainer.flush_steps()[-1]
             if result is None:
@@ -69,16 +77,23 @@ def test_nonfinite_loss_skipped(ctx: CaseContext, dataset: Path, outcome: Outcom
                 after = _params(trainer.model)
                 changed = [k for k in before_skip if not torch.equal(before_skip[k], after[k])]
                 assert not changed, f"a skipped step changed the weights {changed[:3]}"
+                moved = _optimizer_state(trainer.optimizer)
+                assert moved.keys() == optimizer_before.keys(), "a skipped step changed the optimiser's state keys"
+                changed = [k for k in moved if not torch.equal(moved[k], optimizer_before[k])]
+                assert not changed, f"a skipped step changed the optimiser's state {changed[:3]}"
+                optimizer_checked = len(moved)
             trainer.step += 1
     assert skipped == [3, 4], f"skipped steps {skipped}, expected [3, 4]"
+    assert optimizer_checked > 0, "the optimiser had no state to compare after the skipped steps"
     said = log.getvalue()
     for step in skipped:
         line = next((s for s in said.splitlines() if s.startswith(f"step {step}:")), "")
         assert "focal_mask" in line, f"the log of skipped step {step} does not name the term: {line!r}"
     assert all(bool(torch.isfinite(p).all()) for p in trainer.model.parameters()), "weights not finite at the end"
     first = next(s for s in said.splitlines() if s.startswith("step 3:"))
-    outcome.record(f"steps {skipped} skipped, weights untouched; log: {first.strip()!r}",
-                   {"skipped_steps": skipped})
+    outcome.record(f"steps {skipped} skipped, weights and {optimizer_checked} optimiser state tensors (moments, "
+                   f"step counts) untouched; log: {first.strip()!r}",
+                   {"skipped_steps": skipped, "optimizer_tensors": optimizer_checked})
 
 
 def test_nonfinite_gradient_skipped(ctx: CaseContext, dataset: Path, outcome: Outcome) -> None:
@@ -106,8 +121,8 @@ def test_nonfinite_gradient_skipped(ctx: CaseContext, dataset: Path, outcome: Ou
 
 def test_nonfinite_streak_stops(ctx: CaseContext, dataset: Path, outcome: Outcome) -> None:
     """after train.max_nonfinite consecutive non-finite steps training stops with TrainingDiverged naming the
-    term; every checkpoint is finite and those written during the streak hold the last good weights; no
-    model.pt or run.json appears"""
+    term, the streak's steps and the last step run (the trainer's own); every checkpoint is finite and those
+    written during the streak hold the last good weights; no model.pt or run.json appears"""
     out = ctx.folder("guard-streak")
     trainer = make_trainer(dataset, out, steps=20, overrides=["train.max_nonfinite=3",
                                                                      "train.checkpoint_every=2"])
@@ -122,6 +137,14 @@ def test_nonfinite_streak_stops(ctx: CaseContext, dataset: Path, outcome: Outcom
         pytest.fail("training with a NaN loss on every step from step 4 did not stop")
     assert "3 consecutive" in message and "rgb" in message, (
         f"the stop message does not give the count and the term: {message!r}")
+    # the flags are read once per read-back (here every 2nd step, the checkpoints): the streak (steps 4-6) is
+    # seen at one, and the message must name it and the step where training really stopped
+    named = re.search(r"\(steps (\d+)-(\d+)\); training stopped after step (\d+)", message)
+    assert named, f"the stop message does not name the streak's steps and the last step run: {message!r}"
+    first, limit, last = map(int, named.groups())
+    assert (first, limit) == (4, 6), f"the message names the streak as steps {first}-{limit}, not 4-6: {message!r}"
+    assert last == trainer.step - 1, (
+        f"the message says training stopped after step {last}, but the trainer ran steps up to {trainer.step - 1}")
     ckpts = sorted((out / "checkpoints").glob("step_*.pt"))
     steps = [int(p.stem.split("_")[1]) for p in ckpts]
     assert bool(ckpts), "no checkpoint was written before training stopped"
@@ -136,8 +159,8 @@ def test_nonfinite_streak_stops(ctx: CaseContext, dataset: Path, outcome: Outcom
         assert same, f"checkpoint of step {s} (after the NaN steps began) differs from step {last_good}'s weights"
     assert not (out / "model.pt").exists() and not (out / "run.json").exists(), (
         "a diverged run wrote model.pt or run.json")
-    outcome.record(f"stopped at step {trainer.step}: {message[:90]!r}; checkpoints {steps} finite",
-                   {"stopped_at": trainer.step, "checkpoints": steps})
+    outcome.record(f"{trainer.step} steps run: {message[:110]!r}; checkpoints {steps} finite",
+                   {"steps_run": trainer.step, "streak": [first, limit], "checkpoints": steps})
 
 
 def test_no_nan_checkpoint(ctx: CaseContext, dataset: Path, outcome: Outcome) -> None:
