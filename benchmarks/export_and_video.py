@@ -154,9 +154,11 @@ def main() -> int:
     moving = chamfer_distance(at[in_a], bt[in_b])
     parts = [vertices(f / "objects" / f"{args.object}_mesh.ply") @ to_truth[:3, :3].T + to_truth[:3, 3]
              for f in (closed, opened)]
-    part = {"vertices": [len(x) for x in parts], "chamfer_between_states": round(chamfer_distance(*parts), 4)}
+    empty = not all(len(x) for x in parts)  # an undertrained run's part may have no surface at a state
+    part = {"vertices": [len(x) for x in parts],
+            "chamfer_between_states": None if empty else round(chamfer_distance(*parts), 4)}
     direction, travel = truth.travel()
-    if direction is not None:  # a drawer: where its front is, along the truth motion, closed and open
+    if direction is not None and not empty:  # a drawer: where its front is, along the truth motion, closed and open
         front = [float(np.percentile(x @ direction, 95)) for x in parts]
         part.update({"truth_travel": round(travel, 4), "front_shift": round(front[1] - front[0], 4)})
     scene_accuracy = [round(float(np.median(truth.distances(x, truth.states(s)))), 4)

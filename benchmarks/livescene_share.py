@@ -13,6 +13,7 @@ a gradient (the proposal level; every sample then takes object 0's state): a dia
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import tempfile
 import time
@@ -20,7 +21,7 @@ from contextlib import contextmanager
 
 from train_throughput import add_run_arguments, bench_config, bench_inputs, per_round_ratio, resolve_start_step
 
-from stages.scene.machine import machine_info, machine_line
+from stages.scene.machine import contention, machine_info, machine_line
 
 CONFIGS = {
     # name: (method, language table, proposal-level probability field)
@@ -61,7 +62,6 @@ def main() -> int:
     args = p.parse_args()
     resolve_start_step(args)
 
-    import os
 
     import torch
 
@@ -77,26 +77,34 @@ def main() -> int:
         trainer.step = args.start_step
         trainers[name] = trainer
 
+    cuda = args.device.startswith("cuda")
+
     def step(name: str) -> float:
         with no_proposal_probabilities(not CONFIGS[name][2]):
+            if cuda:  # a CUDA step only queues its kernels: time the device's work, not the queueing
+                torch.cuda.synchronize()
             t0 = time.perf_counter()
             trainers[name].train_step()
             trainers[name].step += 1
+            if cuda:
+                torch.cuda.synchronize()
             return time.perf_counter() - t0
 
     for name in CONFIGS:
         for _ in range(args.warmup):
             step(name)
-    load0 = os.getloadavg()[0]
+    before = contention()
     times: dict[str, list[float]] = {name: [] for name in CONFIGS}
     for _ in range(args.steps):
         for name in CONFIGS:
             times[name].append(step(name))
-    load1 = os.getloadavg()[0]
+    after = contention()
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     for f in folders:
         f.cleanup()
     print(f"\ncapture {args.capture.stem}, {args.device}, {args.threads} threads, preset {args.preset}, {args.steps} "
-          f"rounds, load {load0:.2f}-{load1:.2f}\nmachine: {machine_line(machine_info(args.device))}\n")
+          f"rounds; before: {before}; after: {after}; peak RSS {peak_mib:.0f} MiB (every configuration)\n"
+          f"machine: {machine_line(machine_info(args.device))}\n")
     print("| configuration | step ms (median) | / MK-Planes (median of per-round ratios; 25-75 %) |")
     print("|---|---|---|")
     base = times["MK-Planes"]

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import this_checkout  # noqa: F401  (this checkout's stages; torch's threads as the commands' run)
 import torch
 from demo_dataset import cached_demo_dataset
 

@@ -6,12 +6,13 @@ method's preset overlay from config/model/methods/. Writes one long CSV
 parameters) and prints the total per method. The report can call
 ``stages.compare.method_comparison.params_vs_objects`` directly for the same table.
 
-    .venv/bin/python benchmarks/params_vs_objects.py [--out results/params_vs_objects.csv] [--max-objects 10]
+    .venv/bin/python benchmarks/params_vs_objects.py [--out params_vs_objects.csv] [--max-objects 10]
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 
 import pandas as pd
@@ -25,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default=str(ROOT / "results" / "params_vs_objects.csv"))
+    p.add_argument("--out", default=str(Path(tempfile.gettempdir()) / "livescene-bench" / "params_vs_objects.csv"),
+                   help="CSV to write (default: under the temp folder; the repository is left as it is)")
     p.add_argument("--max-objects", type=int, default=10)
     p.add_argument("--scales", nargs="+", default=["cpu-demo", "gpu-paper"])
     args = p.parse_args()

@@ -14,6 +14,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# as `livescene` and the workflow do (docs/model.md, "OpenMP wait policy"): before torch loads, or spinning threads
+# of a busy machine make one configuration's step 2-5x slower from run to run; recorded by machine_info
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 _paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]

@@ -50,7 +50,7 @@ from pathlib import Path
 
 from demo_dataset import DEMO_SPEC, ROOT, cached_demo_dataset
 
-from stages.scene.machine import machine_info, machine_line
+from stages.scene.machine import contention, machine_info, machine_line
 
 METHODS = ["livescene", "mk-planes", "conerf"]
 
@@ -226,16 +226,19 @@ def measure_paired(args: argparse.Namespace, dataset: Path, targets: Path) -> in
     for trainer in trainers.values():
         for _ in range(args.warmup):
             step(trainer)
-    load0 = os.getloadavg()[0]
+    before = contention()
     times: dict[tuple[str, bool], list[float]] = {c: [] for c in configs}
     for _ in range(args.steps):
         for c in configs:
             times[c].append(step(trainers[c]))
-    load1 = os.getloadavg()[0]
+    after = contention()
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # every configuration in one process
     for f in folders:
         f.cleanup()
     print(f"\npaired: capture {args.capture.stem}, {args.device}, {torch.get_num_threads()} threads, preset "
-          f"{args.preset}, {args.steps} rounds of one step per configuration, load {load0:.2f}-{load1:.2f}\n"
+          f"{args.preset}, {args.steps} rounds of one step per configuration; before: {before}; after: {after}; "
+          f"peak RSS {peak_mib:.0f} MiB (all configurations)"
+          + (f", CUDA peak {torch.cuda.max_memory_allocated() / 2**20:.0f} MiB" if cuda else "") + "\n"
           f"machine: {machine_line(machine_info(args.device))}\n")
     print("| method | language | step ms (median) | rays/s |")
     print("|---|---|---|---|")
@@ -259,7 +262,8 @@ def main() -> int:
     add_run_arguments(p)
     p.add_argument("--methods", nargs="+", default=METHODS)
     p.add_argument("--steps", type=int, default=60, help="timed steps (the median is reported)")
-    p.add_argument("--rounds", type=int, default=2, help="passes over every configuration (the fastest is kept)")
+    p.add_argument("--rounds", type=int, default=2, help="passes over every configuration (the fastest is kept; "
+                   "not with --paired, which times --steps rounds of one step each)")
     p.add_argument("--language", choices=["both", "on", "off"], default="both")
     p.add_argument("--paired", action="store_true",
                    help="one process, one step of each configuration in turn (step time ratios that the machine's "
@@ -270,6 +274,9 @@ def main() -> int:
     p.add_argument("--targets", type=Path, help=argparse.SUPPRESS)
     p.add_argument("--with-language", dest="with_language", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
+    for flag in ("steps", "rounds", "warmup"):
+        if getattr(args, flag) < (0 if flag == "warmup" else 1):
+            p.error(f"--{flag} must be at least {0 if flag == 'warmup' else 1}, got {getattr(args, flag)}")
     resolve_start_step(args)
     if args.child:
         args.language = args.with_language

@@ -30,7 +30,9 @@ def machine_info(device: str | None = None) -> dict[str, Any]:
 
     torch is read only if the caller already imported it (this module costs nothing to import).
     """
-    info: dict[str, Any] = {"cpu": cpu_model(), "logical_cores": os.cpu_count(), "python": platform.python_version()}
+    info: dict[str, Any] = {"cpu": cpu_model(), "logical_cores": os.cpu_count(), "python": platform.python_version(),
+                            # spinning OpenMP threads make a busy machine's steps 2-5x slower (docs/model.md)
+                            "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", "unset (spin)")}
     torch = sys.modules.get("torch")
     if torch is not None:
         info["torch"] = torch.__version__
@@ -49,4 +51,21 @@ def machine_line(info: dict[str, Any] | None = None) -> str:
         text += f", torch {info['torch']} ({info['torch_cpu_capability']})"
     if "gpu" in info:
         text += f", {info['gpu']}"
+    if "omp_wait_policy" in info:
+        text += f", OMP_WAIT_POLICY {info['omp_wait_policy']}"
+    return text
+
+
+def contention() -> str:
+    """The machine's load now, for a benchmark's figure: the 1-minute load average and, where Linux tells it
+    (/proc/pressure/cpu), the share of the last 10 s in which some runnable task waited for a CPU (the load
+    average alone did not tell a slow run from a fast one on a shared VM)."""
+    text = f"load {os.getloadavg()[0]:.2f}"
+    try:
+        with open("/proc/pressure/cpu", encoding="ascii") as fh:
+            some = fh.readline().split()
+        avg10 = next(float(f.split("=", 1)[1]) for f in some if f.startswith("avg10="))
+        text += f", cpu pressure {avg10:.0f} %"
+    except (OSError, StopIteration, ValueError, IndexError):
+        pass
     return text
