@@ -30,7 +30,7 @@ def test_summary_and_table_for_a_fast_case(tmp_path, capsys):
     assert summary["format"] == 1 and summary["quick"] is True
     assert summary["counts"] == {"pass": 1, "fail": 0, "error": 0, "skip": 1}
     assert set(summary["machine"]) == {"cpu", "logical_cores", "python", "torch", "torch_cpu_capability", "cuda",
-                                       "threads"}
+                                       "threads", "omp_wait_policy"}
     row, skipped = summary["cases"]  # in the table's order: numerics before bad_input
     assert list(row) == ["name", "group", "result", "metric", "checks", "seconds", "values", "detail"]
     assert row["name"] == "rays_missing_the_box" and row["group"] == "numerics"
