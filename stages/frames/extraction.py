@@ -24,6 +24,7 @@ from .frame_source import (
     CONVERT_FIX,
     IMAGE_SUFFIXES,
     RECOPY_FIX,
+    REENCODE,
     REENCODE_FIX,
     DroppedFrame,
     ImageFolderSource,
@@ -116,7 +117,8 @@ def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: Fram
     def shrink(image: np.ndarray, factor: int) -> np.ndarray:
         return cv2.resize(image, scaled_size(image.shape[1], image.shape[0], factor), interpolation=cv2.INTER_AREA)
 
-    def keep(frame: SourceFrame, score: float, repeat: bool) -> None:
+    def keep(frame: SourceFrame, rank: tuple[bool, bool, float]) -> None:
+        _, fresh, score = rank  # (preferred, not a repeat, sharpness)
         name = frame_name(frame.source_index, width)
         factor = downscale_factor(frame.image.shape[1], frame.image.shape[0], cfg.max_side)
         image = shrink(frame.image, factor) if factor > 1 else frame.image
@@ -126,7 +128,7 @@ def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: Fram
         # timestamps rounded to the nanosecond: index / fps leaves float noise (0.30000000000000004)
         stamp = round(frame.timestamp, 9) if math.isfinite(frame.timestamp) else frame.timestamp
         picked.rows.append({"frame": name, "source_index": frame.source_index, "timestamp": stamp,
-                            "sharpness": score, "repeat": repeat})
+                            "sharpness": score, "repeat": not fresh})
 
     best: tuple[int, tuple[bool, bool, float], SourceFrame] | None = None  # (window, rank, frame)
     previous: bytes | None = None  # digest of the frame before, to tell a repeated frame
@@ -157,7 +159,7 @@ def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: Fram
             picked.size = (frame.image.shape[1], frame.image.shape[0])
             window = rule.window(frame.position)
             if best is not None and window != best[0]:
-                keep(best[2], best[1][2], not best[1][1])
+                keep(best[2], best[1])
                 best = None
             # a frame with a mask annotation wins its window (the labels stage needs it), then a frame that is not
             # a copy of the one before (a stalled phone's), then the sharpest
@@ -165,7 +167,7 @@ def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: Fram
             if best is None or rank > best[1]:
                 best = (window, rank, frame)
     if best is not None:
-        keep(best[2], best[1][2], not best[1][1])
+        keep(best[2], best[1])
     return picked
 
 
@@ -222,8 +224,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             codec = getattr(source, "codec", "")
             raise FrameSourceError(source.path, "no frame could be decoded" + (
                 f" (codec '{codec}': this OpenCV build may have no decoder for it)" if codec else ""),
-                REENCODE_FIX if not codec else "re-encode it to H.264 (`ffmpeg -i VIDEO -c:v libx264 -pix_fmt "
-                "yuv420p fixed.mp4`) or extract its frames into an image folder and pass that folder as --video")
+                REENCODE if codec else REENCODE_FIX)
         if not rows:
             raise _refusal(source, dropped, n_read, rule.n_total, cfg, none_left=True)
         if n_read < n_total and not cfg.accept_truncated:

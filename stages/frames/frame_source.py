@@ -27,9 +27,9 @@ from .folder_numbering import check_numbering, natural_key
 from .integrity import DecoderReport, StderrCapture, decode_image
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
-REENCODE_FIX = ("check that the file plays and was copied completely; re-encode it "
-                "(`ffmpeg -i VIDEO -c:v libx264 -pix_fmt yuv420p fixed.mp4`) or extract its frames into an "
-                "image folder and pass that folder as --video")
+REENCODE = ("re-encode it (`ffmpeg -i VIDEO -c:v libx264 -pix_fmt yuv420p fixed.mp4`) or extract its frames into an "
+            "image folder and pass that folder as --video")
+REENCODE_FIX = f"check that the file plays and was copied completely; {REENCODE}"
 CONVERT_FIX = ("convert photos the stage cannot read (HEIC, RAW such as DNG) to JPEG or PNG, or pass a video file; "
                "a video belongs in --video by itself, not in a folder of frames")
 RECOPY_FIX = ("copy the images again from the camera or phone (these copies are incomplete or damaged), "

@@ -228,9 +228,10 @@ def _parse_clause(raw: str, previous: _Clause | None, command: str, protected: S
     if has_verb:
         text = re.sub(rf"\b{verb}\b", " ", raw, count=1)  # split_clauses lower-cased it
     direction = verb_value if has_verb else (previous.direction if previous is not None else None)
-    inherited = (None, None) if has_verb or previous is None else (previous.value, previous.delta)
-    if has_verb and verb_value is not None:
-        inherited = (verb_value, None)
+    if has_verb:  # a neutral verb ("set") asks for an amount of its own
+        inherited: tuple[float | None, float | None] = (verb_value, None)
+    else:
+        inherited = (previous.value, previous.delta) if previous is not None else (None, None)
     value, delta, text = _amount(text, direction, inherited, command, vocabulary_words)
     pending = value is None and delta is None and (
         (has_verb and verb_value is None) or (not has_verb and previous is not None and previous.pending))

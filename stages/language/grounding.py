@@ -69,38 +69,43 @@ class Grounder:
         phrases = [*e.aliases, normalize_phrase(e.description), e.state_phrase(0.0), e.state_phrase(1.0)]
         return [p for p in dict.fromkeys(phrases) if p]
 
+    def _named_object(self, query: str) -> str | None:
+        """The object a query names in words (``ObjectResolver``'s exact and partial matches), else None."""
+        try:
+            named = self._resolver.resolve(query)
+        except CommandError:  # no name in it, or several: the phrases' meaning decides
+            return None
+        return named.object if named.method in NAMING_METHODS else None
+
+    def _cosines(self, query: str) -> np.ndarray:
+        """``[alpha]``: the query's best cosine to each object's phrases."""
+        return object_similarities(self.encoder.encode([query])[0], self._object_vectors)
+
     def object_weights(self, query: str) -> np.ndarray:
         """``[alpha]``: one-hot for a query that names one object in words (its name or a synonym, or one found in
         the query: ``ObjectResolver``'s exact and partial matches), else the softmax over objects (temperature 10)
         of the query's best cosine to each object's phrases."""
-        try:
-            named = self._resolver.resolve(query)
-        except CommandError:  # no name in it, or several: the phrases' meaning decides
-            named = None
-        if named is not None and named.method in NAMING_METHODS:
-            return (np.array(self.vocabulary.objects) == named.object).astype(np.float64)
-        q = self.encoder.encode([query])[0]
-        return softmax(object_similarities(q, self._object_vectors), self.temperature)
+        named = self._named_object(query)
+        if named is not None:
+            return (np.array(self.vocabulary.objects) == named).astype(np.float64)
+        return softmax(self._cosines(query), self.temperature)
 
     def query_match(self, query: str) -> dict[str, Any]:
         """What a query's map shows: the object it names in words, else whether its meaning is near enough an
         object's (the cosine a command needs, ``ResolverConfig.embedding_min_similarity``); the softmax behind
         ``object_weights`` always sums to 1, so a query that names nothing still lights up its nearest object."""
-        weights = self.object_weights(query)
-        try:
-            named = self._resolver.resolve(query)
-        except CommandError:
-            named = None
-        if named is not None and named.method in NAMING_METHODS:
-            return {"object": named.object, "by": "name", "weights": dict(zip(self.vocabulary.objects,
-                                                                                weights.tolist(), strict=True))}
-        q = self.encoder.encode([query])[0]
-        cosines = object_similarities(q, self._object_vectors)
+        objects = self.vocabulary.objects
+        named = self._named_object(query)
+        if named is not None:
+            weights = (np.array(objects) == named).astype(np.float64)
+            return {"object": named, "by": "name", "weights": dict(zip(objects, weights.tolist(), strict=True))}
+        cosines = self._cosines(query)
+        weights = softmax(cosines, self.temperature)
         best = int(np.argmax(cosines))
         near = float(cosines[best]) >= ResolverConfig().embedding_min_similarity
-        return {"object": self.vocabulary.objects[best] if near else None, "by": "meaning" if near else None,
+        return {"object": objects[best] if near else None, "by": "meaning" if near else None,
                 "best_cosine": round(float(cosines[best]), 4),
-                "weights": dict(zip(self.vocabulary.objects, weights.tolist(), strict=True))}
+                "weights": dict(zip(objects, weights.tolist(), strict=True))}
 
     def relevancy_from_probs(self, probs: np.ndarray, query: str) -> np.ndarray:
         """``[H, W]`` map from rendered per-object probabilities ``[H, W, alpha + 1]`` (background last)."""

@@ -292,9 +292,11 @@ def recorded_dataset(run_dir: str | Path) -> Path | None:
     """The dataset the run was trained on, where it is found (see ``dataset_of_run``); None when the run does not
     say or it is not there."""
     found = run_dataset_root(run_dir)
-    if found is None:
-        return None
-    run_dir = Path(run_dir)
+    return None if found is None else _located(found, Path(run_dir))
+
+
+def _located(found: Path, run_dir: Path) -> Path | None:
+    """``RunConfig.data`` as written, looked for from the current folder, then from each ancestor of the run folder."""
     candidates = [found] if found.is_absolute() else [found, *(parent / found for parent in run_dir.resolve().parents)]
     return next((c for c in candidates if c.is_dir()), None)
 
@@ -314,7 +316,7 @@ def dataset_of_run(run_dir: str | Path, data: str | Path | None = None) -> Path:
     found = run_dataset_root(run_dir)
     if found is None:
         raise InputError(path, "does not say which dataset the run was trained on", "pass --data DS")
-    located = recorded_dataset(run_dir)
+    located = _located(found, run_dir)
     if located is not None:
         return located
     raise InputError(path, f"names the dataset {found}, which is not there from {Path.cwd()} (nor relative to the "

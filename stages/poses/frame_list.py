@@ -45,7 +45,7 @@ def read_frame_list(frames_dir: Path) -> FrameList:
         table = pd.read_csv(csv)
         if {"frame", "source_index"} <= set(table.columns):
             index = {str(f): int(s) for f, s in zip(table["frame"], table["source_index"], strict=True)}
-    if not csv.is_file():
+    else:  # a plain folder: COLMAP reads its files as they are stored
         check_orientation(image_dir, names)
     for name in names:
         if name not in index:

@@ -226,6 +226,12 @@ def earlier_summaries(scene=None):
             if Path(R(s, "report", "summary.json")).is_file() and Path(REPORTS, "scenes", f"{s}.html").is_file()]
 
 
+def earlier_arg():
+    """--earlier of the index: the summaries of the sheet's other scenes that an earlier run wrote a page for."""
+    found = earlier_summaries()
+    return " ".join(["--earlier", *(q(s) for s in found)]) if found else ""
+
+
 def pending_arg():
     """--pending of the index: the sheet's scenes with no page (not built now, nor by an earlier run)."""
     names = [s for s in scenes.index if s not in SELECTED and not earlier_summaries(s)]

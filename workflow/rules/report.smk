@@ -92,7 +92,7 @@ rule report_index:
     params:
         cli=LIVESCENE,
         # Pages of the sheet's other scenes made by earlier runs (`--config only=...`) are listed apart.
-        earlier=lambda w: " ".join(["--earlier"] + [q(s) for s in earlier_summaries()]) if earlier_summaries() else "",
+        earlier=lambda w: earlier_arg(),
         pending=lambda w: pending_arg(),
     threads: 1
     resources:
