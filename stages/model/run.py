@@ -162,12 +162,20 @@ class LoadedRun:
             for j, name in enumerate(self.objects):
                 if name in states:
                     out[j] = float(states[name])
-            return out
+            return self._finite(out)
         arr = np.asarray(states, dtype=np.float64).reshape(-1)
         if arr.shape[0] != alpha:
             raise InputError(self.run_dir, f"{arr.shape[0]} state values for {alpha} objects {self.objects}",
                              "give one value per object, in this order")
-        return arr
+        return self._finite(arr)
+
+    def _finite(self, state: np.ndarray) -> np.ndarray:
+        """A NaN state would reach the field as NaN features and render as empty space without a word."""
+        bad = [name for name, v in zip(self.objects, state, strict=True) if not np.isfinite(v)]
+        if bad:
+            raise InputError(self.run_dir, f"object states of {bad} are not finite numbers",
+                             "give each object a finite state (0 closed, 1 open)")
+        return state
 
     @torch.inference_mode()
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, state: np.ndarray,
@@ -248,7 +256,20 @@ def load_run(run_dir: str | Path, device: str = "cpu") -> LoadedRun:
         raise InputError(path, f"model format {payload.get('format')} was written by an older version of the model "
                          f"stage (this one reads format {MODEL_FORMAT})",
                          "retrain the run (`livescene train ... --out NEW`), or load it with the version that wrote it")
-    return LoadedRun(run_dir, payload, device)
+    run = LoadedRun(run_dir, payload, device)
+    _check_finite_weights(path, dict(run.model.named_parameters()))  # buffers may hold NaN (an absent key state)
+    return run
+
+
+def _check_finite_weights(path: Path, parameters: Mapping[str, torch.Tensor]) -> None:
+    """Refuse weights holding NaN or inf: training never saves them (it stops first), and at render time a NaN
+    density would only show as empty space (``render_weights`` maps it to zero thickness)."""
+    bad = {name: int((~torch.isfinite(t)).sum()) for name, t in parameters.items() if not bool(torch.isfinite(t).all())}
+    if bad:
+        named = ", ".join(f"{name} ({n})" for name, n in sorted(bad.items())[:4]) + (" ..." if len(bad) > 4 else "")
+        raise InputError(path, f"{sum(bad.values())} weights are NaN or infinite, in {named}; `livescene train` "
+                         "never writes such a file, so it was damaged or written by something else",
+                         "copy the run folder again, or retrain it (`livescene train ... --out NEW`)")
 
 
 def _run_folder(run_dir: str | Path) -> Path:

@@ -34,6 +34,11 @@ def test_render_contract(trained_run, tiny_dataset):
         run.render(tiny_dataset.camera, frame.c2w, {"nope": 1.0})
     with pytest.raises(InputError, match="3 objects"):
         run.render(tiny_dataset.camera, frame.c2w, [0.5])
+    # a NaN state would render as empty space (render_weights takes NaN thickness as 0): refused, by either form
+    with pytest.raises(InputError, match=r"states of \['object1'\] are not finite"):
+        run.render(tiny_dataset.camera, frame.c2w, {"object1": float("nan")})
+    with pytest.raises(InputError, match=r"states of \['object0'\] are not finite"):
+        run.state_vector([float("inf"), 0.0, 0.0])
 
 
 def test_render_cli_writes_images(trained_run, tiny_dataset, tmp_path, capsys):
@@ -87,6 +92,21 @@ def test_a_truncated_model_is_refused_with_the_fix(trained_run, tmp_path):
     (cut / "model.pt").write_bytes((trained_run / "model.pt").read_bytes()[:1000])
     with pytest.raises(InputError, match=r"model\.pt: cannot be read, truncated or corrupt.*fix: copy the run"):
         load_run(cut)
+
+
+def test_weights_holding_nan_are_refused_with_the_fix(trained_run, tmp_path):
+    import shutil
+
+    import torch
+
+    bad = tmp_path / "nan"
+    shutil.copytree(trained_run, bad)
+    payload = torch.load(bad / "model.pt", weights_only=True)
+    name = next(k for k in payload["state_dict"] if k.endswith("weight"))  # a parameter (buffers may hold NaN)
+    payload["state_dict"][name].view(-1)[:3] = torch.tensor([float("nan"), float("inf"), 0.5])
+    torch.save(payload, bad / "model.pt")
+    with pytest.raises(InputError, match=rf"model\.pt: 2 weights are NaN or infinite, in {name} \(2\).*fix: copy"):
+        load_run(bad)
 
 
 def test_render_into_the_run_folder_is_refused_and_the_run_kept(trained_run, tiny_dataset, tmp_path, capsys):
