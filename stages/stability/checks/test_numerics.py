@@ -34,7 +34,7 @@ from stages.stability.collector import Outcome
 
 from .brief_training import BriefRun, make_trainer, nonfinite_grads, render_held_out, require_learning, train_briefly
 from .case_context import CaseContext
-from .tiny_scenes import band_labels, capture_dataset, hand_built_dataset, object_names
+from .tiny_scenes import band_labels, capture_dataset, hand_built_dataset, object_names, random_language_targets
 
 pytestmark = pytest.mark.stability_group("numerics")
 
@@ -310,8 +310,10 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> tuple[
     size = ["model.field.base_resolution=64", "model.field.channels=16", "model.field.scales=[1,2]",
             "model.field.hidden=64", "model.field.color_hidden=64", "model.sampling.num_samples=24"]
     rays = 256 if ctx.quick else 1024
+    # with a language table: its Gram matrix loses the entries' norms in reduced precision
+    targets = random_language_targets(root / "targets.npz", ds.objects)
     trainer = make_trainer(ds.root, root / "run", steps=ctx.steps, device=device,
-                           overrides=[*size, f"train.batch_rays={rays}"])
+                           overrides=[*size, f"train.batch_rays={rays}", f"language_targets={targets}"])
     model = trainer.model
     batch = trainer.train_rays.sample(rays, torch.Generator().manual_seed(1))
 
@@ -320,7 +322,7 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> tuple[
         gen = torch.Generator(device=trainer.device).manual_seed(2)
         with torch.autocast(device_type=device, dtype=dtype, enabled=enabled):
             out = model(batch.rays, step=0, generator=gen)
-            terms = model.loss_dict(out, batch, 0)
+            terms = model.loss_dict(out, batch, 0, trainer.language)
         loss = sum(terms.values())
         loss.backward()
         return out, loss, terms
@@ -341,7 +343,19 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> tuple[
         rendered.append((density.detach(), deltas.detach(), weights.detach()))
         return weights
 
-    with mock.patch.object(livescene, "render_weights", watched_weights):
+    # and the language table's rendering: float32 and equal to a float32 render of the same region weights
+    table = model.language_table
+    assert table is not None, "the autocast case trains no language table"
+    languages: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
+    table_render = table.render
+
+    def watched_language(region_weights: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+        emb = table_render(region_weights, values)
+        languages.append((region_weights.detach(), values.detach(), emb.detach()))
+        return emb
+
+    with mock.patch.object(livescene, "render_weights", watched_weights), \
+            mock.patch.object(table, "render", watched_language):
         out, loss, terms = forward(True)
     for hook in hooks:
         hook.remove()
@@ -356,6 +370,17 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> tuple[
     assert weights_err <= 1e-7, (
         f"rendering weights under {dtype} autocast differ from float32 ones of the same densities by "
         f"{weights_err:.2e}: volume rendering ran in reduced precision")
+    assert languages, "the model did not render its language table"
+    language_err = 0.0
+    for region_weights, values, emb in languages:
+        assert emb.dtype == torch.float32, f"the rendered language embedding is {emb.dtype} under autocast"
+        with torch.no_grad():
+            language_err = max(language_err, float((emb - table_render(region_weights.float(), values.float()))
+                                                   .abs().max()))
+    assert language_err <= 1e-6, (
+        f"the language table's render under {dtype} autocast differs from float32 by {language_err:.2e}: its "
+        "Gram matrix ran in reduced precision")
+    assert "language" in terms, "no language loss term under autocast"
     low = {k: v.dtype for k, v in terms.items() if v.dtype != torch.float32}
     assert not low, f"loss terms under {dtype} autocast are not float32: {low}"
     assert bool(torch.isfinite(loss)), f"{dtype} autocast loss is not finite"
@@ -379,17 +404,19 @@ def _autocast_check(ctx: CaseContext, device: str, dtype: torch.dtype) -> tuple[
     require_learning(run, f"training with {precision} autocast on {device}")
     return (f"{samples} x {width} field activations: max rgb error {rgb_err:.1e} (< {tol:g}), loss rel. error "
             f"{loss_rel:.1e} vs float32; {len(rendered)} render_weights calls float32 (error {weights_err:.0e}), "
-            f"{len(terms)} loss terms float32; trainer with mixed_precision={precision}: {run.summary()}",
+            f"language table float32 (error {language_err:.0e}), {len(terms)} loss terms float32; trainer with "
+            f"mixed_precision={precision}: {run.summary()}",
             {"rgb_max_error": rgb_err, "loss_rel_error": loss_rel, "weights_error": weights_err,
+             "language_error": language_err,
              "activations": [samples, width], "trained_loss": [run.first, run.last]})
 
 
 @pytest.mark.parametrize("dtype", [
     pytest.param(torch.bfloat16, id="cpu_bf16", marks=pytest.mark.stability_checks(
         "a training forward + backward under CPU bf16 autocast (the main field's density and colour MLPs really "
-        "run in bf16) gives finite outputs and gradients, volume-rendering weights and loss terms float32 (the "
-        "weights equal float32 ones of the same densities), rgb within 1e-3 of float32; training with "
-        "train.mixed_precision=bf16 fits the colours")),
+        "run in bf16) gives finite outputs and gradients, volume-rendering weights, the language table's "
+        "render and loss terms float32 (each equal to a float32 one of the same inputs), rgb within 1e-3 of "
+        "float32; training with train.mixed_precision=bf16 fits the colours")),
     pytest.param(torch.float16, id="cpu_fp16", marks=pytest.mark.stability_checks(
         "the same under CPU fp16 autocast: finite, rendering and losses float32, rgb within 1e-4 of float32; "
         "train.mixed_precision=fp16 fits the colours")),

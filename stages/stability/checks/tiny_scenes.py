@@ -44,6 +44,18 @@ def band_labels(n_objects: int) -> LabelsFn:
     return labels
 
 
+def random_language_targets(path: Path, objects: list[str], *, dim: int = 32, levels: int = 3, seed: int = 0) -> Path:
+    """A language targets .npz (docs/data-contract.md, "Language targets") of random unit embeddings: what the
+    checks need is a language table to train, not a text encoder."""
+    rng = np.random.default_rng(seed)
+    emb = rng.normal(size=(len(objects), levels, dim))
+    bg = rng.normal(size=dim)
+    np.savez(path, objects=np.array(objects), states=np.linspace(0.0, 1.0, levels), encoder="random",
+             embeddings=(emb / np.linalg.norm(emb, axis=-1, keepdims=True)).astype(np.float32),
+             background=(bg / np.linalg.norm(bg)).astype(np.float32))
+    return path
+
+
 def ramp_states(n_objects: int) -> StatesFn:
     """Every object moves 0 -> 1 over the frames, each with its own phase."""
 
