@@ -4,6 +4,8 @@ Encoding is the slow part of a command or a grounding query on CPU; object
 names, synonyms and state phrases repeat across every call, so they are kept
 in ``<cache_dir>/<encoder-hash>.npz`` (arrays ``texts`` and ``vectors``, plus
 ``encoder`` naming the embedding space so a file is never read for another).
+The file keeps the ``MAX_ENTRIES`` phrases used last: a viewer typing queries all day would otherwise grow
+it, and rewrite all of it, without end.
 """
 
 from __future__ import annotations
@@ -22,6 +24,10 @@ def default_cache_dir() -> Path:
 
     base = os.environ.get("LIVESCENE_CACHE")
     return (Path(base) if base else Path.home() / ".cache" / "livescene") / "embeddings"
+
+
+MAX_ENTRIES = 4096
+"""Phrases kept on disk (about 6 MiB at 384 dimensions): a room's names, synonyms and state phrases are tens."""
 
 
 class EmbeddingCache:
@@ -45,9 +51,11 @@ class EmbeddingCache:
             return {}
 
     def save(self, table: dict[str, np.ndarray]) -> None:
+        """Write the last ``MAX_ENTRIES`` phrases of ``table`` (its order is the order of use, oldest first)."""
         if not table:
             return
-        texts = np.array(list(table), dtype=str)
-        vectors = np.stack(list(table.values())).astype(np.float32)
+        kept = list(table.items())[-MAX_ENTRIES:]
+        texts = np.array([t for t, _ in kept], dtype=str)
+        vectors = np.stack([v for _, v in kept]).astype(np.float32)
         with atomic_path(self.path, suffix=".npz") as tmp:
             np.savez(tmp, texts=texts, vectors=vectors, encoder=np.array(self.encoder_name))

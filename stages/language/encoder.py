@@ -70,6 +70,8 @@ class CachedEncoder:
     def encode(self, texts: Sequence[str]) -> np.ndarray:
         texts = [str(t) for t in texts]
         missing = list(dict.fromkeys(t for t in texts if t not in self._memory))
+        for text in dict.fromkeys(t for t in texts if t in self._memory):
+            self._memory[text] = self._memory.pop(text)  # most recently used last: the disk file keeps the last
         if missing:
             vectors = normalize_rows(self._encode_new(missing))
             for text, vec in zip(missing, vectors, strict=True):

@@ -77,6 +77,21 @@ def test_disk_cache_is_reused_between_encoders(tmp_path):
     assert third.computed == 1
 
 
+def test_disk_cache_keeps_the_phrases_used_last(tmp_path, monkeypatch):
+    from stages.language import embedding_cache
+
+    monkeypatch.setattr(embedding_cache, "MAX_ENTRIES", 3)
+    first = _CountingEncoder(tmp_path)
+    first.encode(["a", "b", "c"])
+    first.encode(["a"])  # used again: now the most recent
+    first.encode(["d"])  # a fourth phrase: "b", used longest ago, leaves the file
+    second = _CountingEncoder(tmp_path)
+    second.encode(["a", "c", "d"])
+    assert second.computed == 0
+    second.encode(["b"])
+    assert second.computed == 1
+
+
 def test_lerf_relevancy_hand_computed():
     e = np.array([1.0, 0.0])
     q = np.array([0.6, 0.8])
