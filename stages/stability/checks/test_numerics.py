@@ -155,7 +155,9 @@ def test_objects_touching_box(ctx: CaseContext, outcome: Outcome) -> None:
     corners = torch.tensor(np.array(np.meshgrid(*[[-1.0, 1.0]] * 4)).reshape(4, -1).T, dtype=torch.float32)
     faces = torch.tensor([[1.0, 0.2, -0.3, 0.5], [-1.0, 1.0, 0.0, -1.0], [1.0 + 1e-6, 0.0, 0.0, 0.0],
                           [-1.0 - 1e-6, 1.0 + 1e-6, 0.3, 1.0]])
-    coords = torch.cat([corners, faces]).clamp(-1.0, 1.0).requires_grad_(True)  # the model clamps the same way
+    # unclamped: the fields themselves must stay finite just outside the box (the model clamps its samples too,
+    # but a clamp here would make the case blind to what the fields do there)
+    coords = torch.cat([corners, faces]).requires_grad_(True)
     gen = torch.Generator().manual_seed(0)
     dirs = torch.nn.functional.normalize(torch.randn(len(coords), 3, generator=gen), dim=-1)
     sigma, rgb = field(coords, dirs)
@@ -449,6 +451,8 @@ def test_near_empty_masks(ctx: CaseContext, outcome: Outcome) -> None:
         if i % 2 == 0:  # object0 shrinks to one pixel, object1 disappears
             out[out < 2] = 2
             out[h - 1, 0] = 0
+        elif i % 4 == 1:  # object1 out of view, object0 as usual: a frame to keep
+            out[out == 1] = 2
         return out
 
     ds = hand_built_dataset(root / "ds", labels=labels)
@@ -459,9 +463,14 @@ def test_near_empty_masks(ctx: CaseContext, outcome: Outcome) -> None:
     unreliable = [f.file_path for k, f in enumerate(frames) if bool((labels_t[k] == -1).all())]
     expected = [f.file_path for k, f in enumerate(frames) if int(f.frame_id) % 2 == 0]
     assert unreliable == expected, f"unreliable frames {unreliable}, expected the one-pixel frames {expected}"
+    absent = [k for k, f in enumerate(frames) if int(f.frame_id) % 4 == 1]
+    assert absent and all(bool((labels_t[k] == 0).any()) and not bool((labels_t[k] == 1).any()) for k in absent), (
+        "the frames without object1 should keep their labels (object0 and background) for the mask losses")
     assert math.isfinite(run.last_terms.get("focal_mask", math.nan)), "focal mask loss missing or not finite"
-    outcome.record(f"{len(unreliable)} one-pixel frames skipped by the mask losses; {run.summary()}",
-                   {"unreliable_frames": len(unreliable), "loss": [run.first, run.last]})
+    outcome.record(f"{len(unreliable)} one-pixel frames skipped by the mask losses, {len(absent)} without object1 "
+                   f"kept; {run.summary()}",
+                   {"unreliable_frames": len(unreliable), "absent_object_frames": len(absent),
+                    "loss": [run.first, run.last]})
 
 
 def test_object_fills_view(ctx: CaseContext, outcome: Outcome) -> None:
