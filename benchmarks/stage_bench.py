@@ -99,13 +99,16 @@ class Row:
         return statistics.median(self.seconds)
 
 
-def timed(part: str, call: Callable[[], object], repeats: int, n: float, unit: str) -> Row:
-    """``call()`` timed ``repeats`` times, with the 1-minute load average before and after."""
+def timed(part: str, call: Callable[..., object], repeats: int, n: float, unit: str,
+          setup: Callable[[], object] | None = None) -> Row:
+    """``call()`` timed ``repeats`` times, with the 1-minute load average before and after; with ``setup``,
+    ``call(setup())``, the setup untimed."""
     load0 = os.getloadavg()[0]
     seconds = []
     for _ in range(repeats):
+        args = () if setup is None else (setup(),)
         t0 = time.perf_counter()
-        call()
+        call(*args)
         seconds.append(time.perf_counter() - t0)
     return Row(part, seconds, n, unit, load_span(load0))
 
@@ -135,7 +138,7 @@ def print_table(title: str, rows: list[Row], before: str, repeats: int, device: 
     print("\n| " + " | ".join(columns) + " |\n" + "|---" * len(columns) + "|")
     for r in rows:
         per = r.median / r.n if r.n else math.nan
-        cells = [r.part, f"{r.median:.3f}", _cell(r.n), r.unit, _cell(per * 1000), _cell(1 / per if per else math.nan)]
+        cells = [r.part, f"{r.median:.4g}", _cell(r.n), r.unit, _cell(per * 1000), _cell(1 / per if per else math.nan)]
         cells += [(r.extra or {}).get(c, "-") for c in extra_columns]
         print("| " + " | ".join([*cells, r.load]) + " |")
     sys.stdout.flush()
