@@ -64,3 +64,10 @@ def chromium(tmp_path: Path):
         yield browser
     finally:
         browser.close()
+
+
+@pytest.fixture(scope="session")
+def tiny_bench_work(tmp_path_factory):
+    """One --work folder for the smoke runs of the stage benchmarks: the tiny capture, its frames and dataset are
+    made once by the first of them and read by the others."""
+    return tmp_path_factory.mktemp("bench-tiny")
