@@ -3,9 +3,9 @@
 
 The capture and its truth dataset are made once into ``--work`` (child processes), and, unless ``--run`` names
 one, a run is trained for ``--steps`` in a child process (cached in ``--work``; the default, 2000 steps with the
-language table, is render_throughput.py's run). Then ``livescene evaluate`` runs once, then ``--repeats`` times, in this
-process (its ``main``, writing into ``--work``), and the table gives, median over the repeats, the evaluation's
-own timings (timings.json):
+language table, is render_throughput.py's run). Then ``livescene evaluate`` runs once, then ``--repeats`` times,
+in this process (its ``main``, writing into ``--work``), and the table gives, median over the repeats, the
+evaluation's own timings (timings.json):
 
 - ``held-out renders``: the run's renders of the held-out views (ms per view, rays/s);
 - ``held-out scores``: the rest of the held-out part: images read, PSNR, SSIM, LPIPS (where its weights are
@@ -22,7 +22,8 @@ own timings (timings.json):
 
 Below it, the metrics alone on the held-out renders of the last repeat (PSNR, SSIM, LPIPS: ms per view).
 Each row has the 1-minute load average before and after; above the table the CPU pressure before and after,
-the peak RSS of this process (evaluations, not the training) and the machine::
+the peak RSS of this process (evaluations, not the training) and the machine (a run is in docs/language.md,
+"Benchmark (evaluation)")::
 
     .venv/bin/python benchmarks/evaluate_throughput.py
     .venv/bin/python benchmarks/evaluate_throughput.py --run RUN --views 8

@@ -12,7 +12,8 @@ times:
 - ``extract_frames --downscale 2 4``: the same, also writing the images_2/ and images_4/ copies.
 
 Prints one markdown row per part: median seconds, frames per call, ms per frame, frames/s and the 1-minute load
-average before and after; above it the CPU pressure before and after, the peak RSS and the machine::
+average before and after; above it the CPU pressure before and after, the peak RSS and the machine (a run is in
+docs/poses.md, "Benchmark (frames)")::
 
     .venv/bin/python benchmarks/frames_throughput.py
     .venv/bin/python benchmarks/frames_throughput.py --capture config/captures/tiny.yaml --repeats 1  # smoke

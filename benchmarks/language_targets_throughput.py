@@ -18,7 +18,8 @@ The capture and its truth dataset are made once into ``--work`` (child processes
 Crop targets (``--crop-targets``, OpenCLIP) need local OpenCLIP weights and are not measured here.
 
 Each row: median seconds, items per call, ms per item, items/s and the 1-minute load average before and after;
-above it the CPU pressure before and after, the peak RSS and the machine::
+above it the CPU pressure before and after, the peak RSS and the machine (a run is in docs/language.md,
+"Benchmark (language targets)")::
 
     .venv/bin/python benchmarks/language_targets_throughput.py
     .venv/bin/python benchmarks/language_targets_throughput.py --capture config/captures/tiny.yaml --repeats 1

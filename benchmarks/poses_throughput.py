@@ -18,7 +18,7 @@ matcher, default features), writing a fresh POSES folder each time. The stage ti
 
 Each row gives seconds, images per call, ms per image, images/s and the 1-minute load average before and after
 the repeats (the same for every row: one call times them all). ``--parallel`` runs COLMAP on ``--threads``
-(results then vary run to run, docs/poses.md "Repeatability")::
+(results then vary run to run, docs/poses.md "Repeatability"). A run is in docs/poses.md, "Benchmark (poses)"::
 
     .venv/bin/python benchmarks/poses_throughput.py
     .venv/bin/python benchmarks/poses_throughput.py --capture config/captures/tiny.yaml --repeats 1  # smoke

@@ -13,7 +13,8 @@ The capture is rendered and its frames extracted once into ``--work`` (child pro
 
 Each row: median seconds, units per call, ms per unit, units/s and the 1-minute load average before and after;
 above it the CPU pressure before and after, the peak RSS and the machine. The workflow keeps at most 300 frames
-(``livescene frames --count 300``), so the stage sees at most that many::
+(``livescene frames --count 300``), so the stage sees at most that many. A run is in docs/labels-states.md,
+"Benchmark (states)"::
 
     .venv/bin/python benchmarks/states_throughput.py
     .venv/bin/python benchmarks/states_throughput.py --capture config/captures/tiny.yaml --repeats 1  # smoke
