@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import tempfile
 import time
@@ -198,6 +199,9 @@ def main() -> int:
                            "video_bytes": video.stat().st_size if code == 0 else 0}
     load["after"] = os.getloadavg()
     result["loadavg"] = {k: [round(x, 2) for x in v] for k, v in load.items()}
+    # this process's max RSS: the export, the video and the truth geometry they are compared with (and the
+    # capture's rendering when it was not cached)
+    result["peak_rss_mib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
     (args.work / "result.json").write_text(json.dumps(result, indent=2))
     print(json.dumps(result, indent=2))
     g, e = result["geometry"], result["export"]
@@ -211,7 +215,8 @@ def main() -> int:
         v = result["video"]
         print(f"video: {v['frames']} frames 256x192 in {v['seconds_wall']} s ({v['fps_rendered']} fps; goal <= 60 s; "
               f"{v['cpu_seconds']} CPU s)")
-    print(f"load average before {result['loadavg']['before']}, after {result['loadavg']['after']}")
+    print(f"peak memory {result['peak_rss_mib']:.0f} MiB (process max RSS); load average before "
+          f"{result['loadavg']['before']}, after {result['loadavg']['after']}")
     return 0
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import resource
 import time
@@ -28,6 +29,7 @@ from stages.model.ray_dataset import RayBatch
 from stages.model.rays import RayBundle
 from stages.model.scene_normalization import aabb_near_far
 from stages.model.trainer import autocast_dtype
+from stages.scene.machine import machine_info, machine_line
 
 
 def random_batch(n: int, alpha: int, device: torch.device, gen: torch.Generator) -> RayBatch:
@@ -114,8 +116,11 @@ def main() -> int:
     device = torch.device(args.device)
     rays = args.rays or load_config(args.preset, args.overrides).train.batch_rays
     for alpha in args.objects:
-        print(json.dumps(measure(args.method, args.preset, alpha, rays, args.steps, args.warmup, device,
-                                 args.precision, args.overrides)), flush=True)
+        load0 = os.getloadavg()[0]
+        row = measure(args.method, args.preset, alpha, rays, args.steps, args.warmup, device, args.precision,
+                      args.overrides)
+        print(json.dumps({**row, "load_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)]}), flush=True)
+    print(f"machine: {machine_line(machine_info(args.device))}")
     return 0
 
 

@@ -7,7 +7,9 @@ trained run, then renders ``--views`` held-out views at full size, twice each:
 - ``all``: rgb, depth, accumulation, probabilities and the language embedding.
 
 Prints seconds per view (median and best), fps, rays/s, the training rays/s of the same run (median of
-its train_log.csv) and the ratio, and the 1-minute load average before and after::
+its train_log.csv) and the ratio, the peak memory of the renders (this process's max RSS: the dataset is made
+and the run trained in child processes; on CUDA also the allocator's peak) and the 1-minute load average
+before and after::
 
     .venv/bin/python benchmarks/render_throughput.py --work /tmp/render_bench
 """
@@ -25,7 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from demo_dataset import ROOT, cached_demo_dataset
+from demo_dataset import DEMO_SPEC, ROOT
+from stage_bench import dataset_folder, peak_rss_mib
 from train_throughput import language_targets
 
 from stages.scene.machine import machine_info
@@ -65,12 +68,14 @@ def main() -> int:
 
     torch.set_num_threads(args.threads)
     args.work.mkdir(parents=True, exist_ok=True)
-    _, dataset = cached_demo_dataset(args.work)
+    dataset = dataset_folder(args.work, DEMO_SPEC)  # made in a child process: not in this one's peak memory
     run_dir = args.run or trained_run(args.work, dataset, args.steps)
     run = load_run(run_dir, device=args.device)
     ds = read_scene(dataset)
     test = ds.frames_in("test")
     frames = [test[i * len(test) // args.views] for i in range(args.views)]
+    if args.device.startswith("cuda"):
+        torch.cuda.reset_peak_memory_stats()
     load0 = os.getloadavg()[0]
     results = {}
     for name, outputs in (("rgb", ("rgb",)), ("all", ("rgb", "depth", "accumulation", "probs", "language"))):
@@ -90,6 +95,9 @@ def main() -> int:
     out = {"run": str(run_dir), "steps": run.step, "threads": torch.get_num_threads(), "device": args.device,
            "render_chunk": run.config.train.render_chunk, **results, "training_rays_per_s": train,
            "render_over_training": round(results["rgb"]["rays_per_s"] / train, 2) if train else None,
+           "peak_rss_mib": round(peak_rss_mib(), 1),
+           "cuda_peak_mib": round(torch.cuda.max_memory_allocated() / 2**20, 1) if args.device.startswith("cuda")
+           else None,
            "load_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)],
            "machine": machine_info(args.device)}
     print(json.dumps(out, indent=2))

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import statistics
 import sys
@@ -136,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         viewer.stop()
         shutil.rmtree(profile, ignore_errors=True)
     results["load_after"] = loadavg()
+    results["peak_rss_mib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)  # the viewer's
     print(json.dumps(results))
     moves = results["moves"]
     for key in ("end_to_end_s", "to_server_s", "server_s", "render_s", "to_browser_s"):
@@ -143,6 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{key:>13}: median {statistics.median(values):.3f} s, p90 {quantile(values, 0.9):.3f} s, "
               f"min {min(values):.3f}, max {max(values):.3f}  ({len(values)} moves)")
     print(f"cpu_s_per_move: {results['cpu_s_per_move']:.3f} s  (this process: rendering + viser + DevTools client)")
+    print(f"peak memory: {results['peak_rss_mib']:.0f} MiB  (this process's max RSS: the viewer and its renders)")
     print(f"load after: {results['load_after']}   (cat /proc/loadavg)")
     return 0
 
