@@ -5,12 +5,16 @@ trainer sees it (the rays' pixels, labels, states, times, normalised poses and
 directions, the language targets). ``--resume`` continues a checkpoint only when
 both match; otherwise the run folder holds a different run (the poses were
 re-estimated, a mask changed, a hyperparameter moved) and continuing it would
-silently hand back a model of the old inputs (docs/model.md, "Resuming").
+silently hand back a model of the old inputs (docs/model.md, "Resuming only the same run"). It also carries a
+digest of the code that trains (``code_digest``): a checkpoint of other code is another run as well, and a
+finished one must not stand in for a training that ``snakemake --forcerun train`` asks for after a code change.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -72,4 +76,21 @@ def data_digest(tensors: dict[str, torch.Tensor | np.ndarray | None]) -> str:
         arr = t.detach().cpu().contiguous().numpy() if isinstance(t, torch.Tensor) else np.ascontiguousarray(t)
         h.update(f"{name}:{arr.dtype.str}:{arr.shape};".encode())
         h.update(arr.tobytes())
+    return h.hexdigest()
+
+
+TRAINING_CODE = ("model", "scene")
+"""The packages under ``stages`` whose code decides what a training learns: the model and the dataset reader."""
+
+
+@functools.cache
+def code_digest(stages: Path | None = None) -> str:
+    """SHA-256 over torch's version and every .py file of ``TRAINING_CODE`` (path and bytes, in path order) under
+    ``stages`` (default: this package's own ``stages`` folder)."""
+    stages = Path(__file__).resolve().parents[1] if stages is None else stages
+    h = hashlib.sha256(f"torch {torch.__version__};".encode())
+    for package in TRAINING_CODE:
+        for path in sorted((stages / package).rglob("*.py")):
+            h.update(f"{path.relative_to(stages).as_posix()};".encode())
+            h.update(path.read_bytes())
     return h.hexdigest()

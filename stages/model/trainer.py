@@ -48,7 +48,7 @@ from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
 from .ray_dataset import RayBatch, RayDataset, state_vector
-from .run_inputs import config_differences, data_digest, flatten_config
+from .run_inputs import TRAINING_CODE, code_digest, config_differences, data_digest, flatten_config
 from .scene_normalization import SceneNormalization
 from .step_graphs import GraphCaptureError, StepGraphs
 
@@ -381,6 +381,7 @@ class Trainer:
             },
             "config": self.config.to_dict(),
             "data_digest": self.data_digest,
+            "code_digest": code_digest(),
             "device_type": self.device.type,  # whose generator the jitter state is
         }
         path = self.checkpoint_path(self.step)
@@ -398,6 +399,12 @@ class Trainer:
         elif state["data_digest"] != self.data_digest:
             reasons.append(f"its training data differ from {self.config.data} (poses, images, masks, states or "
                            "language targets changed)")
+        if state.get("code_digest") is None:
+            reasons.append("it records no code digest (written by an older livescene), so the code that trained it "
+                           "cannot be checked")
+        elif state["code_digest"] != code_digest():
+            reasons.append(f"it was trained by other code (stages/{' or stages/'.join(TRAINING_CODE)} changed since, "
+                           "or torch's version)")
         changed = config_differences(state.get("config", {}), self.config.to_dict())
         if changed:
             was, now = flatten_config(state.get("config", {})), flatten_config(self.config.to_dict())
@@ -814,6 +821,7 @@ class Trainer:
             "eval_miou": self.last_eval_miou,
             "data": str(cfg.data),
             "data_digest": self.data_digest,
+            "code_digest": code_digest(),
             "seed": cfg.seed,
             "rays_per_step": cfg.train.batch_rays,
         }

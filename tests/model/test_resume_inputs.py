@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 import torch
 import yaml
 
-from stages.model import Trainer
-from stages.model.run_inputs import config_differences, data_digest
+from stages.model import Trainer, run_inputs
+from stages.model.run_inputs import code_digest, config_differences, data_digest
 from stages.model.train_cli import main as train_main
 from stages.scene import InputError
 
@@ -105,6 +107,50 @@ def test_a_finished_run_rerun_with_nothing_to_train_keeps_its_records(tiny_datas
     with pytest.raises(InputError, match=r"config differs in train\.eval_every"):
         Trainer(tiny_config(tiny_dataset.root, "train.eval_every=1", steps=3), out, device="cpu", progress=False,
                 resume=True).train()
+
+
+def test_a_checkpoint_of_other_code_is_another_run(tiny_dataset, tmp_path, tiny_config, monkeypatch):
+    """`snakemake --forcerun train` after the model code changed: the finished checkpoint must not stand in for the
+    training asked for (the same inputs and config, other code); on unchanged code it is kept, as training is
+    deterministic."""
+    import stages.model.trainer as trainer_module
+
+    out = tmp_path / "run"
+    first = _finished(tiny_config(tiny_dataset.root, steps=3), out)
+    assert first["code_digest"] == code_digest()
+    weights = (out / "model.pt").read_bytes()
+    monkeypatch.setattr(trainer_module, "code_digest", lambda: "0" * 64)  # the code as edited since
+    with pytest.raises(InputError, match=r"trained by other code \(stages/model or stages/scene changed"):
+        Trainer(tiny_config(tiny_dataset.root, steps=3), out, device="cpu", progress=False, resume=True).train()
+    (out / "run.json").unlink()  # Snakemake removes a job's outputs before it runs
+    Trainer(tiny_config(tiny_dataset.root, steps=3), out, device="cpu", progress=False, resume=True,
+            restart_stale=True).train()
+    with (out / "train_log.csv").open() as fh:  # trained again from step 0, not "nothing to train"
+        assert [int(r["step"]) for r in csv.DictReader(fh)] == [1, 2, 3]
+    assert json.loads((out / "run.json").read_text())["code_digest"] == "0" * 64
+    a = torch.load(out / "model.pt", weights_only=True)["state_dict"]
+    b = torch.load(io.BytesIO(weights), weights_only=True)["state_dict"]
+    for k in a:  # the "edited" code is the same code here, so training again gives the same bits
+        torch.testing.assert_close(a[k], b[k], rtol=0, atol=0, equal_nan=True, msg=k)
+
+
+def test_the_code_digest_follows_the_model_and_scene_code_only(tmp_path):
+    stages = Path(run_inputs.__file__).resolve().parents[1]
+    copy = tmp_path / "stages"
+    for package in ("model", "scene", "report"):
+        shutil.copytree(stages / package, copy / package, ignore=shutil.ignore_patterns("__pycache__"))
+    assert code_digest(copy) == code_digest()  # the same files give the same digest, wherever they lie
+    (copy / "report" / "__init__.py").write_text("# not training code\n")
+    code_digest.cache_clear()  # computed once per process and folder: the code a training loaded
+    assert code_digest(copy) == code_digest()
+    edited = copy / "model" / "losses.py"
+    edited.write_text(edited.read_text() + "# a comment\n")
+    code_digest.cache_clear()
+    changed = code_digest(copy)
+    assert changed != code_digest()
+    (copy / "scene" / "new_reader.py").write_text("")
+    code_digest.cache_clear()
+    assert code_digest(copy) not in (changed, code_digest())
 
 
 def test_cli_restart_stale_flag(tiny_dataset, tmp_path, tiny_overrides, capsys):
