@@ -246,6 +246,20 @@ def bench_path(name):
     return str(Path(RESULTS, "{scene}", "benchmarks", f"{name}.tsv"))
 
 
+def run_stopped(logfiles):
+    """Whether this run was stopped (Ctrl-C, or SIGTERM: a user's or a cluster's cancel) rather than failed, from
+    what Snakemake logs when it stops on request."""
+    marks = ("Terminating processes on user request", "Will exit after finishing currently running jobs")
+    for name in logfiles or []:
+        try:
+            text = Path(name).read_text(errors="replace")
+        except OSError:
+            continue
+        if any(mark in text for mark in marks):
+            return True
+    return False
+
+
 def failed_scenes(logfiles):
     """The selected scenes of this run's failed jobs, read from Snakemake's own log: each error block names the
     failing job's log file, and a scene's job logs are <results>/<scene>/logs/."""
