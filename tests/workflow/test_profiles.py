@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import shutil
 
 import pytest
 import yaml
@@ -139,3 +140,23 @@ def test_colmap_takes_one_core(workflow_copy):
     assert not re.search(r"^\s*threads: ", poses[0], flags=re.M), poses[0]  # a dry run prints `threads:` above 1
     assert "--threads 1" in poses[0] and "--parallel" not in poses[0], poses[0]
     assert not any(entry.startswith("poses=") for entry in profile("slurm")["set-threads"])
+
+
+def test_a_plain_snakemake_run_at_the_root_uses_the_default_profile(tmp_path):
+    """Snakemake looks for a workflow profile next to the main Snakefile (the root one): profiles/default there
+    links workflow/profiles/default, so `snakemake --cores 2` schedules as `make run` does."""
+    link = REPO / "profiles" / "default"
+    assert link.is_symlink() and link.resolve() == (REPO / "workflow" / "profiles" / "default").resolve()
+    wf = WorkflowCopy(tmp_path / "wf")
+    shutil.copytree(REPO / "profiles", wf.root / "profiles", symlinks=True)
+    run = wf.snakemake("-n", "--cores", "2")
+    assert run.code == 0, run.output[-3000:]
+    assert "Using workflow specific profile profiles/default" in run.output
+    # the profile's set-threads: a training counts as one core, so two run side by side (a dry run prints the
+    # threads of a job only above 1); without the profile each takes the 2 of train.threads
+    trains = [text for rule, text in run.blocks() if rule == "train"]
+    assert trains and not any("threads:" in text for text in trains)
+    (wf.root / "profiles" / "default").unlink()
+    bare = wf.snakemake("-n", "--cores", "2")
+    assert "Using workflow specific profile" not in bare.output
+    assert all("threads: 2" in text for rule, text in bare.blocks() if rule == "train")
