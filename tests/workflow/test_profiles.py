@@ -160,3 +160,16 @@ def test_a_plain_snakemake_run_at_the_root_uses_the_default_profile(tmp_path):
     bare = wf.snakemake("-n", "--cores", "2")
     assert "Using workflow specific profile" not in bare.output
     assert all("threads: 2" in text for rule, text in bare.blocks() if rule == "train")
+
+
+@pytest.mark.skipif(importlib.util.find_spec("torch") is None or __import__("torch").cuda.is_available(),
+                    reason="checks a machine without a GPU")
+def test_the_gpu_config_on_a_machine_without_one_stops_before_any_job(tmp_path):
+    """Before, the first training failed after every CPU job of the scene (COLMAP among them) had run."""
+    wf = WorkflowCopy(tmp_path / "wf")
+    run = wf.snakemake("--cores", "2", "--workflow-profile", "workflow/profiles/gpu", "--configfile", "config/gpu.yaml")
+    assert run.code != 0
+    assert "config device: cuda, but torch" in run.output and "sees no GPU on this machine" in run.output
+    assert "fix: run on a machine with a GPU" in run.output and "--config device=cpu gpus=0" in run.output
+    assert not (wf.root / "results").exists()  # no job ran
+    assert wf.snakemake("-n", "--cores", "2", "--configfile", "config/gpu.yaml").code == 0  # a dry run plans as before

@@ -246,6 +246,18 @@ def bench_path(name):
     return str(Path(RESULTS, "{scene}", "benchmarks", f"{name}.tsv"))
 
 
+def check_local_gpu(device):
+    """Stop before the first job when the config asks for CUDA on a machine torch sees no GPU on: the trainings and
+    renders would fail only after every CPU job of the selected scenes (COLMAP among them) had run."""
+    import torch
+
+    if not torch.cuda.is_available():
+        raise WorkflowError(f"config device: {device}, but torch {torch.__version__} sees no GPU on this machine (the "
+                            "trainings and renders would fail after every CPU job had run); fix: run on a machine "
+                            "with a GPU, or leave config/gpu.yaml and the gpu profile out (the defaults train on the "
+                            "CPU), or add --config device=cpu gpus=0")
+
+
 def run_stopped(logfiles):
     """Whether this run was stopped (Ctrl-C, or SIGTERM: a user's or a cluster's cancel) rather than failed, from
     what Snakemake logs when it stops on request."""
