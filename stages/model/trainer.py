@@ -427,6 +427,8 @@ class Trainer:
         why = self.stale_reason(state)
         if not why:
             self.load_checkpoint(state)
+            if self.step < self.config.train.max_steps:  # a finished run says "nothing to train" instead
+                print(f"{self.out}: resumed from {path.name} at step {self.step}", file=sys.stderr)
         elif self.restart_stale:
             self.discard_checkpoints(why)
         else:

@@ -19,7 +19,7 @@ def _weights(run_dir):
     return torch.load(run_dir / "model.pt", weights_only=True)["state_dict"]
 
 
-def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_config):
+def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_config, capsys):
     config = tiny_config(tiny_dataset.root, "train.eval_every=4", steps=5)  # the stop (step 2) is off the grid
     straight = tmp_path / "straight"
     Trainer(config, straight, device="cpu", progress=False).train()
@@ -43,6 +43,7 @@ def test_resume_after_sigterm_is_bit_identical(tiny_dataset, tmp_path, tiny_conf
         Trainer(config, interrupted, device="cpu", progress=False).train()
 
     Trainer(config, interrupted, device="cpu", progress=False, resume=True).train()
+    assert f"{interrupted}: resumed from step_000002.pt at step 2" in capsys.readouterr().err  # the job's log says so
     a, b = _weights(straight), _weights(interrupted)
     assert a.keys() == b.keys()
     for k in a:
