@@ -90,7 +90,7 @@ class ProbabilityConfig:
     """Give rejected samples a row of the k-planes of their own: objects' states then take the k axis from the
     main field's second vertex on (``kappa -> 1/(K-1) + (1 - 1/(K-1)) kappa``, K = ``field.k_resolution``), so
     the static value 0 (the first vertex) is read by the static room alone, not also by every closed object
-    (reference: off, one shared row; docs/model.md "The static room's own row")."""
+    (reference: off, one shared row; docs/rooms.md "The static room's own row")."""
     state_input: Literal["all", "none"] = "all"
     """What the decoder reads besides the features: ``all`` = the whole state vector (reference code), ``none`` =
     nothing, so an object's region is the space it sweeps over all its states and no state change moves any
