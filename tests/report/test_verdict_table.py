@@ -51,6 +51,8 @@ def test_rows_are_tidy_and_keep_every_scene_and_metric():
     assert (pantry.loc["held_out_psnr", "ci95_low"], pantry.loc["held_out_psnr", "ci95_high"]) == (-1.18, -0.31)
     assert pantry.loc["grounding_iou", "verdict"] == "level"
     assert pd.isna(pantry.loc["unseen_psnr", "mean_difference"]) and pantry.loc["unseen_psnr", "verdict"] == "none"
+    # no paired items, no interval: the CSV leaves it empty rather than inventing [0, 0]
+    assert pd.isna(pantry.loc["unseen_psnr", "ci95_low"]) and pd.isna(pantry.loc["unseen_psnr", "ci95_high"])
     assert frame[frame["baseline"] == "conerf"]["rests_on_flagged_run"].tolist() == ["conerf"]
 
 

@@ -52,6 +52,9 @@ def test_verdict_needs_the_interval_to_exclude_zero():
     assert verdict(4, [0.1, 2.0]) == "LiveScene ahead"
     assert verdict(4, [-3.0, -0.01]) == "LiveScene behind"
     assert verdict(4, [-0.5, 2.0]) == "no measurable difference (n=4)"
+    # a closed interval that reaches 0 does not exclude it, from either side
+    assert verdict(4, [0.0, 2.0]) == "no measurable difference (n=4)"
+    assert verdict(4, [-2.0, 0.0]) == "no measurable difference (n=4)"
     assert verdict(1, None) == "no measurable difference (n=1)"  # one item: no interval, no verdict
     assert verdict(0, None) == "no paired items"
     # a large mean difference on few, noisy items is still no verdict
@@ -76,6 +79,27 @@ def test_items_are_matched_by_frame_state_vector_and_query():
     n, mean, _ = paired_difference(unseen_items(a), unseen_items(b))
     assert (n, mean) == (2, pytest.approx((0.5 + 1.0) / 2))
     assert paired_difference(grounding_items(a), grounding_items(b))[:2] == (1, pytest.approx(0.1))
+
+
+def test_a_non_novel_record_is_not_an_unseen_item_even_with_a_psnr():
+    """Evaluations before version 2 rendered non-novel combinations too: their PSNR is no unseen item."""
+    m = _metrics(records=[{"frame": "0", "states": {"x": 0.0}, "unseen": True, "psnr": 18.0},
+                          {"frame": "0", "states": {"x": 0.5}, "unseen": False, "psnr": 30.0},
+                          {"frame": "2", "states": {"x": 1.0}, "psnr": 31.0}])  # no flag: not shown to be novel
+    assert unseen_items(m) == {("0", (("x", 0.0),)): 18.0}
+
+
+def test_an_undefined_value_is_no_item():
+    """NaN / inf (a json NaN, an exact reproduction's PSNR) is left out, never averaged or paired."""
+    m = _metrics(views={"0": 20.0, "2": float("inf"), "4": float("nan")},
+                 records=[{"frame": "0", "states": {"x": 0.0}, "unseen": True, "psnr": float("inf")}],
+                 ious={"door": ([0.5, float("nan")], ["0", "2"]), "the door": ([0.7, 0.9], ["0", "2"])})
+    for q in m["grounding"]["queries"]:
+        q["object"] = "door"
+    assert held_out_items(m) == {("0",): 20.0}
+    assert unseen_items(m) == {}
+    # view 0: (0.5 + 0.7) / 2; view 2: the NaN query is left out, the other one's 0.9 stays
+    assert grounding_items(m) == pytest.approx({("door", "0"): 0.6, ("door", "2"): 0.9})
 
 
 def test_a_name_and_its_synonym_are_one_grounding_item_per_view():
@@ -138,6 +162,19 @@ def test_compare_says_when_a_verdict_rests_on_a_flagged_run():
     assert compare({"mk-planes": b}, {}) == []  # without LiveScene there is nothing to compare
 
 
+def test_a_verdict_on_a_flagged_livescene_run_says_so():
+    """A verdict rests on both runs: LiveScene's own flag is named as much as the baseline's."""
+    a = _metrics(views={"0": 20.0, "2": 21.0})
+    b = _metrics(views={"0": 19.0, "2": 20.0})
+    results = compare({"livescene": a, "mk-planes": b}, {"livescene": "undertrained"})
+    held = next(r for r in results if r.metric == "held_out_psnr")
+    assert held.flagged == {"livescene": "undertrained"}
+    assert held.statement == "LiveScene ahead, but it rests on a flagged run: livescene (undertrained)"
+    assert held.to_dict()["rests_on_flagged_run"] == ["livescene"]
+    both = compare({"livescene": a, "mk-planes": b}, {"livescene": "undertrained", "mk-planes": "not trustworthy"})
+    assert both[0].flagged == {"livescene": "undertrained", "mk-planes": "not trustworthy"}
+
+
 # -- trust flags --------------------------------------------------------------------------------------------------
 
 
@@ -163,6 +200,25 @@ FLOORS = {"min_steps": 1000, "min_psnr": 20.0, "min_grounding_miou": 0.5, "min_o
 def test_each_trust_floor_flags_the_run(run, metrics, reason, kind):
     flag = assess_run("m", run, {"trust": FLOORS}, metrics)
     assert flag.flagged and flag.reasons == [reason] and flag.label == kind
+
+
+def test_each_floor_is_compared_with_its_own_value():
+    """With distinct floors, the accumulation is held to min_object_accumulation, not to the mIoU floor."""
+    floors = FLOORS | {"min_grounding_miou": 0.3, "min_object_accumulation": 0.6}
+    flag = assess_run("m", _run(), {"trust": floors}, _metrics({"0": 25.0}, miou=0.9, object_accumulation=0.55))
+    assert flag.reasons == ["objects mostly transparent: held-out accumulation over object pixels 0.55 < "
+                            "trust.min_object_accumulation 0.6 (their colour comes from behind them)"]
+    # and the mIoU to its own floor: 0.4 passes 0.3 though it is under the accumulation floor
+    assert not assess_run("m", _run(), {"trust": floors}, _metrics({"0": 25.0}, miou=0.4,
+                                                                   object_accumulation=0.7)).flagged
+
+
+def test_a_run_json_without_a_step_count_is_undertrained():
+    """An unknown step count cannot be shown to reach min_steps."""
+    flag = assess_run("m", {"status": "completed"}, {"trust": FLOORS}, _metrics({"0": 25.0}))
+    assert flag.reasons == ["run.json records no step count"] and flag.label == "undertrained"
+    flag = assess_run("m", {"status": "completed", "steps": "lots"}, {"trust": FLOORS}, _metrics({"0": 25.0}))
+    assert flag.reasons == ["run.json records no step count"]
 
 
 def test_a_run_above_every_floor_is_not_flagged():
