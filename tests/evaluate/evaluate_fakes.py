@@ -102,3 +102,51 @@ def make_eval_dataset(root: Path, n_frames: int = 8) -> SceneDataset:
                       meta={"units": "m"})
     write_scene(ds, root)
     return ds
+
+
+class SlidingTruthRenderer(FakeTruthRenderer):
+    """A truth whose ids follow the state, in colour: the fridge is 3 columns wide and slides right with its state
+    (columns ``[round(3 s), round(3 s) + 3)``: 0..2 shut, 3..5 open), so where it was and where it is differ; the
+    drawer stays on columns 10..15. Red, green and blue differ on every surface. With ``shadow_column`` the fridge,
+    once at least half open, casts a shadow there (``shadow_ids`` ``[1, H, W]``, as the capture renderer reports)."""
+
+    def __init__(self, shadow_column: int | None = None) -> None:
+        super().__init__()
+        self.shadow_column = shadow_column
+
+    @staticmethod
+    def fridge_cols(state: float) -> slice:
+        start = round(float(3 * state))
+        return slice(start, start + 3)
+
+    def render(self, c2w, states, camera=None):
+        self.calls += 1
+        if not isinstance(states, dict):
+            states = dict(zip(OBJECTS, states, strict=True))
+        fridge, drawer = states.get("fridge", 0.0), states.get("drawer", 0.0)
+        ids = np.zeros((H, W), dtype=np.int32)
+        ids[:, self.fridge_cols(fridge)] = 1
+        ids[:, DRAWER_COLS] = 2
+        rgb = np.empty((H, W, 3), dtype=np.float32)
+        rgb[:] = (0.5, 0.4, 0.3)
+        rgb[ids == 1] = (0.2 + 0.5 * fridge, 0.3, 0.1)
+        rgb[ids == 2] = (0.1, 0.25 + 0.5 * drawer, 0.6)
+        out = {"rgb": rgb, "depth": np.ones((H, W), np.float32), "ids": ids}
+        if self.shadow_column is not None:
+            shadow = np.zeros((1, H, W), dtype=np.int32)
+            if fridge >= 0.5:
+                shadow[0, :, self.shadow_column] = 1
+            out["shadow_ids"] = shadow
+        return out
+
+
+class TruthRun(FakeRun):
+    """The fake run, rendering the truth renderer's image at every state (also a view's own state, where FakeRun
+    returns the stored PNG) plus the same +-ERROR on columns 0..5: every PSNR is exact, none has PNG rounding."""
+
+    def render(self, camera, c2w, states, frame_index=None, outputs=None):
+        self.rendered.append((frame_index, states))
+        base = self.truth.render(c2w, states)["rgb"].astype(np.float64)
+        probs = label_map_to_onehot(np.array([[-1, 0, 1][i] for i in ids_map().ravel()]).reshape(H, W), 2)
+        return {"rgb": base + _checker(), "depth": np.ones((H, W)), "accumulation": _accumulation(),
+                "probs": probs.astype(np.float32)}

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from evaluate_fakes import ERROR
+from evaluate_fakes import ERROR, FRIDGE_COLS, FakeRun, H, SlidingTruthRenderer, TruthRun, make_eval_dataset
 from tiny_language_run import BagOfWordsEncoder
 
 from stages.evaluate import EvaluateConfig, TruthSource, evaluate_run, read_sim3
@@ -89,17 +89,31 @@ def test_evaluate_run_on_a_fake_run(eval_scene, tmp_path):
     assert any((out / "unseen").iterdir()) and any((out / "grounding").iterdir())
 
 
-def test_wrong_object_scores_zero_iou(eval_scene, tmp_path):
+def test_miou_by_kind_averages_names_and_synonyms_apart(eval_scene, tmp_path):
+    """A run whose probabilities leave the fridge's pixels to the background: the fridge's queries score IoU 0
+    (an empty map against a 6-column mask), the drawer's 1. Only the fridge has a synonym here, so the names'
+    mIoU is (0 + 1) / 2 and the synonyms' is 0; all three queries together average 1/3."""
     ds, run, _ = eval_scene
-    # swap the synonyms: "refrigerator" now names the drawer, so its map lands on the wrong pixels
-    vocab = ObjectVocabulary.from_prompts(ds.objects, {"drawer": {"synonyms": ["refrigerator"]}})
+
+    class MissesTheFridge(type(run)):
+        def render(self, camera, c2w, states, frame_index=None, outputs=None):
+            out = super().render(camera, c2w, states, frame_index, outputs)
+            probs = out["probs"].copy()
+            probs[:, FRIDGE_COLS] = [0.0, 0.0, 1.0]  # background (last channel)
+            return out | {"probs": probs}
+
+    vocab = ObjectVocabulary.from_prompts(ds.objects, {"fridge": {"synonyms": ["refrigerator"]}})
     grounder = Grounder(vocab, BagOfWordsEncoder())
-    metrics = evaluate_run(run, ds, tmp_path / "e", None, grounder, EvaluateConfig(save_renders=False))
-    q = {q["query"]: q for q in metrics["grounding"]["queries"]}
-    assert q["refrigerator"]["object"] == "drawer"
-    assert q["fridge"]["probs"]["iou"]["mean"] == pytest.approx(1.0)
-    assert metrics["unseen_combinations"]["status"].startswith("skipped")
-    assert not (tmp_path / "e" / "renders").exists()
+    ground = evaluate_run(MissesTheFridge(ds, run.truth), ds, tmp_path / "e", None, grounder,
+                          EvaluateConfig(save_renders=False))["grounding"]
+    q = {q["query"]: q for q in ground["queries"]}
+    assert {k: (v["object"], v["kind"]) for k, v in q.items()} == {
+        "fridge": ("fridge", "name"), "refrigerator": ("fridge", "synonym"), "drawer": ("drawer", "name")}
+    assert q["fridge"]["probs"]["iou"]["mean"] == 0.0 and q["refrigerator"]["probs"]["iou"]["mean"] == 0.0
+    assert q["drawer"]["probs"]["iou"]["mean"] == pytest.approx(1.0)
+    assert ground["miou_probs_name"] == pytest.approx(0.5)
+    assert ground["miou_probs_synonym"] == pytest.approx(0.0)
+    assert ground["miou_probs"] == pytest.approx(1 / 3)
 
 
 def test_a_synonym_two_objects_share_is_not_scored_as_one_of_them(eval_scene, tmp_path):
@@ -198,6 +212,36 @@ def test_grounding_from_rendered_language_only_in_the_same_space(eval_scene, tmp
     metrics = evaluate_run(other, ds, tmp_path / "b", None, grounder, EvaluateConfig(save_renders=False))
     assert metrics["grounding"]["sources"] == ["probs"]
     assert metrics["grounding"]["language_source"].startswith("skipped: run trained with encoder")
+
+
+def test_a_map_on_the_other_objects_pixels_scores_zero_iou(eval_scene, tmp_path):
+    """A run that confuses the fridge and the drawer: each one's probability and rendered language lie on the
+    other's columns. The fridge's name then takes the fridge's probability (weight 1) and finds it on the drawer's
+    6 columns, none on its own: IoU = 0 / 12 columns. The language map of "fridge" is over the pixels that carry
+    the fridge's embedding (exactly them, as the correctly placed run shows), now the drawer's: IoU 0 too."""
+    ds, run, _ = eval_scene
+    grounder = _grounder(ds)
+
+    class Confused(_LanguageRun):
+        def render(self, camera, c2w, states, frame_index=None):
+            out = self.inner.render(camera, c2w, states, frame_index)
+            probs = out["probs"][..., [1, 0, 2]]
+            return out | {"probs": probs, "language": self.table[probs.argmax(-1)]}
+
+    right = evaluate_run(_LanguageRun(run, grounder.encoder, grounder.encoder.name), ds, tmp_path / "right", None,
+                         grounder, EvaluateConfig(save_renders=False))["grounding"]
+    wrong = evaluate_run(Confused(run, grounder.encoder, grounder.encoder.name), ds, tmp_path / "e", None, grounder,
+                         EvaluateConfig(save_renders=False))
+    q = {q["query"]: q for q in wrong["grounding"]["queries"]}
+    r = {q["query"]: q for q in right["queries"]}
+    assert r["fridge"]["probs"]["iou"]["mean"] == pytest.approx(1.0)
+    assert r["fridge"]["language"]["iou"]["mean"] == pytest.approx(1.0)
+    for query in ("fridge", "refrigerator", "drawer", "kitchen drawer"):
+        assert q[query]["probs"]["iou"]["mean"] == 0.0 and q[query]["probs"]["iou"]["n"] == 4
+    assert q["fridge"]["language"]["iou"]["mean"] == 0.0
+    assert wrong["grounding"]["miou_probs_name"] == 0.0 and wrong["grounding"]["miou_probs_synonym"] == 0.0
+    assert wrong["unseen_combinations"]["status"].startswith("skipped")
+    assert not (tmp_path / "e" / "renders").exists()
 
 
 def _keys(tree) -> set[str]:
@@ -400,3 +444,104 @@ def test_render_scale_for_takes_the_largest_frame_of_per_frame_cameras(eval_scen
     big = replace(ds.frames[0], camera=ds.camera.scaled(3.0))
     mixed = replace(ds, frames=[big, *ds.frames[1:]])
     assert render_scale_for(mixed, max(w, h)) == pytest.approx(1 / 3)
+
+
+def _truth_of(ds, renderer) -> TruthSource:
+    return TruthSource(renderer=renderer, camera=ds.camera, object_ids={"fridge": 1, "drawer": 2},
+                       poses={f.source_index: f.c2w for f in ds.frames},
+                       states={f.source_index: dict(f.state) for f in ds.frames}, origin="fake capture")
+
+
+def test_the_seen_reference_scores_each_view_at_its_own_state(eval_scene, tmp_path):
+    """The run's render of the view at its own state against the truth's: the +-0.1 error on the fridge's 6 of 16
+    columns over the whole image, on 6 of the 12 object columns over the object pixels."""
+    ds, _, truth = eval_scene
+    run = TruthRun(ds, truth.renderer)
+    cfg = EvaluateConfig(max_views=1, unseen_views=2, locality_views=0, save_renders=False)
+    seen = evaluate_run(run, ds, tmp_path / "e", truth, None, cfg)["unseen_combinations"]["seen_reference"]
+    assert [v["frame"] for v in seen["views"]] == ["00000", "00006"]
+    assert seen["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6) and seen["psnr"]["n"] == 2
+    assert seen["psnr_objects"]["mean"] == pytest.approx(10 * math.log10(1 / (ERROR**2 * 6 / 12)), abs=1e-6)
+    assert seen["psnr_objects"]["n"] == 2
+    assert (6, ds.frames[6].state) in run.rendered  # rendered at the view's own state
+
+
+def test_an_object_that_moves_is_scored_where_it_was_and_where_it_is(tmp_path):
+    """The sliding fridge: shut on columns 0..2 in view 00000 (its own state), open on 3..5 in the combination
+    (fridge 1, drawer 0). The unseen render's moved region is both, 6 columns; the run's error there is 0.1, so
+    20 dB. The locality test's swept region is the fridge at 0, .25, .5, .75, 1 (columns 0..5) and the shadow it
+    casts on column 14 once half open, dilated by 2 px: columns 0..7 and 12..15."""
+    ds = make_eval_dataset(tmp_path / "scene")
+    sliding = SlidingTruthRenderer(shadow_column=14)
+    truth = _truth_of(ds, sliding)
+    run = TruthRun(ds, sliding)
+    cfg = EvaluateConfig(max_views=1, unseen_views=1, novelty_min=0.4, observed_within=None, locality_views=1,
+                         save_renders=False)
+    metrics = evaluate_run(run, ds, tmp_path / "e", truth, None, cfg)
+    records = metrics["unseen_combinations"]["records"]
+    opened = next(r for r in records if r["states"] == {"fridge": 1.0, "drawer": 0.0})
+    assert opened["frame"] == "00000" and opened["moved_objects"] == ["fridge"]
+    assert opened["moved_pixels"] == 6 * H
+    assert opened["psnr_moved"] == pytest.approx(20.0, abs=1e-6)
+    assert opened["psnr"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
+    drawer = next(r for r in records if r["states"] == {"fridge": 0.0, "drawer": 1.0})
+    assert drawer["moved_objects"] == ["drawer"] and drawer["moved_pixels"] == 6 * H  # columns 10..15 both times
+
+    local = metrics["locality"]
+    fridge = next(r for r in local["records"] if r["object"] == "fridge")
+    assert fridge["region_pixels"] == (8 + 4) * H
+    # the truth changes only inside that region; so does the run (it adds a fixed error to the truth)
+    assert fridge["truth_outside_x255"] == 0.0 and fridge["model_outside_x255"] == pytest.approx(0.0, abs=1e-9)
+    assert local["objects"]["fridge"]["local"]
+
+
+def test_the_nominal_exposure_target_is_the_image_divided_by_its_gains(eval_scene, tmp_path):
+    """A run that renders frame 00002 exactly at the nominal exposure (stored image x e^-gain, per channel) plus
+    the fake's +-0.1 on the fridge: against the image divided by its gains it scores the fake's PSNR exactly."""
+    ds, run, _ = eval_scene
+    gains = [0.2, 0.1, 0.0]
+
+    class Nominal(type(run)):
+        def __init__(self, *args) -> None:
+            super().__init__(*args)
+            self.exposure_gains = {"00002": gains}
+
+        def render(self, camera, c2w, states, frame_index=None, outputs=None):
+            out = super().render(camera, c2w, states, frame_index, outputs)
+            frame = self.ds.frames[frame_index]
+            if frame.frame_id in self.exposure_gains:
+                stored = self.ds.load_image(frame).astype(np.float64)
+                error = out["rgb"] - stored
+                out["rgb"] = stored * np.exp(-np.asarray(gains)) + error
+            return out
+
+    held = evaluate_run(Nominal(ds, run.truth), ds, tmp_path / "e", None, None,
+                        EvaluateConfig(unseen_views=0, locality_views=0, save_renders=False))["held_out"]
+    views = {v["frame"]: v for v in held["views"]}
+    assert views["00002"]["psnr_nominal"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
+    assert views["00002"]["psnr"] < HELD_OUT_PSNR - 2  # against the image as filmed it is off
+    assert held["psnr_nominal"]["n"] == 1
+
+
+def test_a_learned_state_run_renders_held_out_views_at_its_learned_state(eval_scene, tmp_path):
+    """Such a run is asked for no state (None): it renders the state it learned for the frame index."""
+    ds, run, _ = eval_scene
+
+    class Learned(FakeRun):
+        state_mode = "learned"
+
+        def __init__(self, *args) -> None:
+            super().__init__(*args)
+            self.asked: list[dict | None] = []
+
+        def render(self, camera, c2w, states, frame_index=None, outputs=None):
+            self.asked.append(states)
+            learned = self.ds.frames[frame_index].state  # it learned each frame's state exactly
+            return super().render(camera, c2w, learned if states is None else states, frame_index, outputs)
+
+    learned = Learned(ds, run.truth)
+    held = evaluate_run(learned, ds, tmp_path / "e", None, None,
+                        EvaluateConfig(unseen_views=0, locality_views=0, save_renders=False))["held_out"]
+    assert learned.asked == [None] * 4
+    assert held["state_source"] == "run's learned state at the frame index"
+    assert held["psnr"]["mean"] == pytest.approx(HELD_OUT_PSNR, abs=1e-6)
