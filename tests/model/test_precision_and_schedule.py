@@ -82,3 +82,28 @@ def test_rgb_gradient_reaches_learned_states_through_k(tiny_dataset, tmp_path, t
     assert all(g is not None for g in grads) and any(float(g.abs().sum()) > 0 for g in grads)
     spatial = model.field.encoding.grids[0].plane_groups[0]  # spatial planes (xy, xz, yz) still learn from rgb
     assert spatial.grad is not None and float(spatial.grad.abs().sum()) > 0
+
+
+def test_frame_time_spans_zero_to_one_over_evenly_numbered_frames():
+    from stages.model.methods import SceneInfo
+
+    info = SceneInfo(objects=[], n_frames=5)
+    assert [info.frame_time(i) for i in range(5)] == [0.0, 0.25, 0.5, 0.75, 1.0]  # i / (n - 1)
+    assert SceneInfo(objects=[], n_frames=1).frame_time(0) == 0.0
+
+
+def test_key_frames_every_n_frames_sit_at_their_frames_times(tiny_dataset, tiny_config):
+    # six frames numbered 0..5: times i / 5. Every second frame is a key frame: 0, 2, 4 -> 0, 0.4, 0.8, each frame's
+    # own state; rendering (SceneInfo.frame_time) and training (frame_times) agree on every frame
+    from stages.model.trainer import scene_info
+    from stages.scene.key_frame_states import frame_times
+
+    cfg = tiny_config(tiny_dataset.root, "model.state.key_frame_every=2")
+    info = scene_info(tiny_dataset, cfg, None)
+    assert info.key_times == pytest.approx([0.0, 0.4, 0.8], abs=1e-7)
+    objects = tiny_dataset.objects
+    expect = [tiny_dataset.frames[i].state[o] for i in (0, 2, 4) for o in objects]
+    assert [v for row in info.key_states for v in row] == pytest.approx(expect, abs=1e-6)  # stored as float32
+    times = frame_times(tiny_dataset.frames)
+    assert [info.frame_time(i) for i in range(6)] == pytest.approx([i / 5 for i in range(6)], abs=1e-7)
+    assert [info.frame_time(i) for i in range(6)] == pytest.approx(list(times), abs=1e-7)

@@ -111,3 +111,47 @@ def test_state_input_none_gives_every_state_the_same_regions():
         for a, b in ((field(pos, before.expand(64, 3)), field(pos, after.expand(64, 3))),
                      (field(pos, before.repeat(64, 1)), field(pos, after.repeat(64, 1)))):
             assert torch.isfinite(a).all() and (not torch.allclose(a, b, atol=1e-6)) == moves
+
+
+def _tiny_livescene(n_objects: int = 2):
+    from stages.model.config import ModelConfig
+    from stages.model.methods import LiveSceneModel, SceneInfo
+
+    cfg = ModelConfig()
+    cfg.field.base_resolution, cfg.field.channels, cfg.field.scales = 8, 4, [1]
+    cfg.proposal.resolutions, cfg.sampling.num_proposal_samples = [[8, 4]], [8]
+    cfg.probability.resolution = 8
+    torch.manual_seed(0)
+    return LiveSceneModel(cfg, SceneInfo(objects=[f"o{i}" for i in range(n_objects)], n_frames=4))
+
+
+def test_livescene_maps_kappa_to_the_planes_k_axis_in_minus_one_to_one():
+    # the planes' k axis spans [-1, 1] like x, y and z (grid_sample's convention): kappa 0, 0.25, 1 -> -1, -0.5, 1
+    model = _tiny_livescene()
+    pos = torch.tensor([[0.1, 0.2, 0.3], [0.0, 0.0, 0.0], [-0.5, 0.5, 0.0]])
+    states = torch.tensor([[0.0, 0.7], [0.25, 0.7], [1.0, 0.7]])
+    logits = torch.tensor([[4.0, 0.0, 0.0]]).expand(3, 3)  # object 0 wins everywhere
+    coords = model.coordinates(pos, states, logits, torch.zeros(3))
+    assert torch.equal(coords[:, :3], pos)
+    torch.testing.assert_close(coords[:, 3], torch.tensor([-1.0, -0.5, 1.0]))
+
+
+def test_every_sample_reads_its_own_rays_state(monkeypatch):
+    # two rays of five samples, object 0 wins at every sample: ray 0 (kappa_0 = 0) must sit at k = -1 throughout,
+    # ray 1 (kappa_0 = 1) at k = +1
+    from stages.model.ray_samplers import uniform_samples
+    from stages.model.rays import RayBundle
+
+    model = _tiny_livescene()
+    states = torch.tensor([[0.0, 1.0], [1.0, 0.0]])
+    rays = RayBundle(torch.zeros(2, 3), torch.tensor([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), torch.full((2,), 0.05),
+                     torch.ones(2), states)
+    monkeypatch.setattr(model.probability_field, "forward",
+                        lambda pos, st, grids: torch.tensor([[5.0, 0.0, 0.0]]).expand(pos.shape[0], 3))
+    seen = []
+    coordinates = model.coordinates
+    monkeypatch.setattr(model, "coordinates", lambda *a: seen.append(coordinates(*a)) or seen[-1])
+    with torch.no_grad():
+        model._level(rays, uniform_samples(rays.nears, rays.fars, 5), states, 0, final=False, grad_density=False)
+    k = seen[0][:, 3].view(2, 5)
+    assert torch.equal(k, torch.tensor([[-1.0] * 5, [1.0] * 5]))
