@@ -171,10 +171,20 @@ def test_measured_mode_refuses_frames_it_cannot_measure(tiny_dataset, tmp_path, 
 def test_what_a_ray_does_not_cover_shows_the_background(tiny_overrides, mode, training):
     """``last_sample``: the colour of each ray's last sample shows behind it (nerfacto's default), in training and
     in the render path, which therefore colours that sample even when its weight is under the floor; ``fixed``:
-    the reference's white (docs/model.md, "Background colour")."""
+    the reference's white (docs/model.md, "Background colour"). An opaque wall at x > 0.3 hides the last sample of
+    the rays that reach it (weight under RENDER_WEIGHT_FLOOR); the rays that point away stay half transparent."""
+    from stages.model.methods.livescene import RENDER_WEIGHT_FLOOR
+
     cfg = load_config("cpu-demo", [*tiny_overrides, f"model.sampling.background_mode={mode}"])
     torch.manual_seed(0)
     model = build_model("livescene", cfg.model, INFO).train(training)
+    density = model.field.density
+
+    def walled(coords, cache=None):
+        sigma, geo = density(coords, cache)
+        return torch.where(coords[:, 0] > 0.3, torch.full_like(sigma, 1e4), sigma), geo
+
+    model.field.density = walled
     final: dict = {}
     level = model._level
 
@@ -189,8 +199,11 @@ def test_what_a_ray_does_not_cover_shows_the_background(tiny_overrides, mode, tr
         out = model(_rays(64), outputs=("rgb",)) if not training else model(_rays(64))
     w, rgb = final["weights"].detach(), final["rgb"].detach()
     behind = rgb[:, -1, :] if mode == "last_sample" else torch.ones(3)
+    hidden = w[:, -1] <= RENDER_WEIGHT_FLOOR
+    assert hidden.sum() >= 8  # rays whose last sample the render path would otherwise leave uncoloured
     if mode == "last_sample":
         assert (rgb[:, -1, :] > 0).all()  # computed for every ray, visible or not
+        assert (rgb[hidden, -1, :] > 0).all()
     expected = (w[..., None] * rgb).sum(1) + (1.0 - w.sum(-1, keepdim=True)) * behind
     torch.testing.assert_close(out["rgb"].detach(), expected)
     assert (1.0 - w.sum(-1)).max() > 0.05  # the check sees the background: some rays are far from opaque
