@@ -305,3 +305,102 @@ def test_a_finished_run_retrained_for_more_steps_is_unfinished_until_they_are_do
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["step_000002.pt"]
     Trainer(tiny_config(tiny_dataset.root, steps=5), out, device="cpu", progress=False, resume=True).train()
     assert json.loads((out / "run.json").read_text())["steps"] == 5
+
+
+def test_the_optimizer_follows_the_learning_rate_schedule(tiny_dataset, tmp_path, tiny_config):
+    # lr 0.02, warm-up 2 of 4 steps, final ratio 0.1: factor (s + 1) / 2 in the warm-up, then
+    # 0.1 + 0.9 (1 + cos(pi (s - 2) / 2)) / 2. Before step s (0-based) Adam uses lr x factor(s)
+    cfg = tiny_config(tiny_dataset.root, "train.lr=0.02", "train.lr_final_ratio=0.1", steps=4)
+    trainer = Trainer(cfg, tmp_path / "lr", device="cpu", progress=False)
+    group = trainer.optimizer.param_groups[0]
+    assert group["lr"] == pytest.approx(0.01)
+    before = [p.detach().clone() for _, p in trainer._named_params]
+    seen = []
+    for _ in range(4):
+        trainer.train_step()
+        trainer.step += 1
+        seen.append(group["lr"])
+        if trainer.step == 1:
+            # Adam's first update is lr x g / (|g| + eps): lr itself wherever |g| >> eps
+            moved = max((p.detach() - b).abs().max().item() for (_, p), b in zip(trainer._named_params, before,
+                                                                               strict=True))
+            assert moved == pytest.approx(0.01, rel=1e-3)
+    assert seen == pytest.approx([0.02, 0.02, 0.011, 0.002], rel=1e-9)
+    assert [r["lr"] for r in trainer.log_rows] == [] and all(trainer.flush_steps())
+    assert [r["lr"] for r in trainer.log_rows] == pytest.approx(seen, rel=1e-9)  # the log: the next step's rate
+
+
+def test_a_non_finite_gradient_with_finite_terms_skips_the_step(tiny_dataset, tmp_path, tiny_config, capsys):
+    trainer = Trainer(tiny_config(tiny_dataset.root), tmp_path / "nan-grad", device="cpu", progress=False)
+    name, param = next((n, p) for n, p in trainer._named_params if n.startswith("field."))
+    param.register_hook(lambda g: g * float("nan"))
+    before = {n: p.detach().clone() for n, p in trainer._named_params}
+    pending = trainer.train_step()
+    assert torch.isfinite(pending.values).all()  # every loss term is finite
+    assert trainer.flush_steps() == [None]
+    assert f"non-finite gradient in {name}" in capsys.readouterr().err
+    for n, p in trainer._named_params:  # skipped: no parameter moved, the poisoned one included
+        assert torch.equal(p.detach(), before[n]), n
+
+
+class _Drawn(Exception):
+    pass
+
+
+def _first_draw(tiny_dataset, tmp_path, tiny_config, monkeypatch, seed: int,
+                batch: int = 64) -> tuple[torch.Tensor, int]:
+    """The flat ray indices of a trainer's first step (the step stops once they are drawn) and the ray count."""
+    cfg = tiny_config(tiny_dataset.root, f"train.batch_rays={batch}", seed=seed)
+    trainer = Trainer(cfg, tmp_path / f"seed{seed}-{batch}", device="cpu", progress=False)
+    drawn = []
+
+    def record(flat):
+        drawn.append(flat.clone())
+        raise _Drawn
+
+    monkeypatch.setattr(trainer.train_rays, "batch", record)
+    with pytest.raises(_Drawn):
+        trainer.train_step()
+    return drawn[0], trainer.train_rays.n_rays
+
+
+def test_the_seed_sets_the_ray_draws(tiny_dataset, tmp_path, tiny_config, monkeypatch):
+    a, _ = _first_draw(tiny_dataset, tmp_path / "a", tiny_config, monkeypatch, 0)
+    again, _ = _first_draw(tiny_dataset, tmp_path / "b", tiny_config, monkeypatch, 0)
+    other, _ = _first_draw(tiny_dataset, tmp_path / "c", tiny_config, monkeypatch, 1)
+    assert torch.equal(a, again)
+    assert not torch.equal(a, other)
+
+
+def test_ray_draws_reach_every_pixel_of_every_frame(tiny_dataset, tmp_path, tiny_config, monkeypatch):
+    # 3 training frames of 16 x 12: 576 rays. 16 384 uniform draws with replacement miss a given ray with
+    # probability (1 - 1/576)^16384 ~ e^-28, so every ray, the last one included, is drawn
+    flat, n_rays = _first_draw(tiny_dataset, tmp_path, tiny_config, monkeypatch, 0, batch=16384)
+    assert n_rays == 3 * 16 * 12
+    assert torch.equal(torch.unique(flat), torch.arange(n_rays))
+
+
+def test_a_flat_index_is_frame_row_col_of_one_pixel(tiny_dataset):
+    """``RayDataset.batch``: flat = frame * H * W + row * W + col, colour and direction of that same pixel."""
+    from stages.model.ray_dataset import RayDataset
+    from stages.model.scene_normalization import SceneNormalization
+
+    ds = tiny_dataset
+    frames = ds.frames_in("train")
+    rays = RayDataset(ds, frames, SceneNormalization.from_dataset(ds), 0.05)
+    h, w = 12, 16
+    picks = [(0, 2, 5), (1, 11, 0), (2, 7, 15), (1, 0, 9), (2, 10, 3)]  # (frame, row, col), row != col
+    flat = torch.tensor([f * h * w + r * w + c for f, r, c in picks])
+    batch = rays.batch(flat)
+    cam = ds.camera
+    for i, (f, r, c) in enumerate(picks):
+        image = ds.load_image(frames[f])
+        torch.testing.assert_close(batch.rgb[i], torch.tensor(image[r, c], dtype=torch.float32), atol=0.6 / 255,
+                                   rtol=0)
+        # pixel centre (c + 0.5, r + 0.5) in OpenGL camera axes (x right, y up, z back), rotated to the world;
+        # the [-1, 1] scene box is already the normalised frame
+        d = np.array([(c + 0.5 - cam.cx) / cam.fx, -(r + 0.5 - cam.cy) / cam.fy, -1.0])
+        c2w = np.asarray(frames[f].c2w)
+        d = c2w[:3, :3] @ d
+        torch.testing.assert_close(batch.rays.directions[i], torch.tensor(d / np.linalg.norm(d), dtype=torch.float32))
+        torch.testing.assert_close(batch.rays.origins[i], torch.tensor(c2w[:3, 3], dtype=torch.float32))
