@@ -135,3 +135,61 @@ def test_the_runs_dataset_is_found_from_the_cwd_or_the_run_folders_ancestors(tmp
     (run / "config.yaml").write_text("data: results/other/dataset\n")
     with pytest.raises(InputError, match="names the dataset results/other/dataset, which is not there"):
         dataset_of_run(run)
+
+
+SHARES = [0.1, 0.6, 0.2, 0.1]  # three objects and the background
+
+
+def _fake_model(run, monkeypatch, seen: list) -> None:
+    """Replace the run's model by one whose outputs are known: depth = the ray's near (its box entry, normalised
+    units), with the logits the rendered probabilities (focal_mask_on: probabilities) of shares SHARES and a ray
+    weight of 0.5, rgb and accumulation 0.5."""
+    import torch
+
+    def forward(rays, step=0, outputs=(), **kwargs):
+        seen.append(rays)
+        n = len(rays)
+        assert rays.states.shape[1] + 1 == len(SHARES)
+        out = {"rgb": torch.full((n, 3), 0.5), "depth": rays.nears.clone(), "accumulation": torch.full((n,), 0.5),
+               "logits": torch.zeros(n, len(SHARES))}
+        out = {k: v for k, v in out.items() if k in outputs}
+        if "logits" in outputs:
+            out["probs"] = 0.5 * torch.tensor(SHARES).expand(n, len(SHARES))
+        return out
+
+    monkeypatch.setattr(run.model, "forward", forward)
+
+
+def test_render_rays_returns_depth_in_dataset_units(trained_run, monkeypatch):
+    # a scene box [-2, 2]^3: the normalised scene is the dataset's scaled by 0.5. A camera at world (0, 0, -6)
+    # looking along +z enters the box at world z = -2, 4 dataset units away (2 normalised units)
+    from stages.model.scene_normalization import SceneNormalization
+
+    run = load_run(trained_run)
+    run.norm = SceneNormalization(np.diag([0.5, 0.5, 0.5, 1.0]), "scene_box")
+    assert run.norm.scale == pytest.approx(0.5)
+    _fake_model(run, monkeypatch, [])
+    out = run.render_rays(np.array([[0.0, 0.0, -6.0]]), np.array([[0.0, 0.0, 1.0]]), np.zeros(len(run.objects)),
+                          outputs=("depth",))
+    assert out["depth"] == pytest.approx([4.0], rel=1e-6)
+
+
+def test_rendered_probabilities_are_divided_by_the_rays_weight(trained_run, monkeypatch):
+    # rendered probabilities (focal_mask_on: probabilities) sum to the ray's weight, 0.5 here: the image shows the
+    # shares of the weight, SHARES, which sum to 1
+    run = load_run(trained_run)
+    _fake_model(run, monkeypatch, [])
+    out = run.render_rays(np.zeros((3, 3)), np.eye(3), np.zeros(len(run.objects)), outputs=("probs",))
+    np.testing.assert_allclose(out["probs"], np.tile(SHARES, (3, 1)), rtol=1e-6)
+
+
+def test_render_rays_gives_every_ray_the_requested_time(trained_run, monkeypatch):
+    import torch
+
+    run = load_run(trained_run)
+    seen: list = []
+    _fake_model(run, monkeypatch, seen)
+    run.render_rays(np.zeros((5, 3)), np.tile([1.0, 0.0, 0.0], (5, 1)), np.zeros(len(run.objects)), time_value=0.6,
+                    outputs=("rgb",))
+    times = torch.cat([r.times for r in seen])
+    assert times.shape == (5,) and torch.all(times == torch.tensor(0.6))
