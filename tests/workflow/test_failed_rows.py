@@ -34,9 +34,14 @@ def test_a_failed_row_is_named_with_the_command_that_rebuilds_the_index(tmp_path
 
 def test_a_stopped_run_says_to_run_the_same_command_again(tmp_path):
     """Ctrl-C while a job runs: the jobs did not fail, so the advice is to rerun, not to fix rows."""
+    # a capture of many frames: its job is still running when the signal comes, however fast the machine
+    spec = yaml.safe_load((REPO / "config" / "captures" / "tiny.yaml").read_text())
+    spec["video"]["n_frames"] = 3000
+    long = tmp_path / "long.yaml"
+    long.write_text(yaml.safe_dump(spec))
     wf = WorkflowCopy(tmp_path / "wf")
     wf.write_scenes([
-        {"scene": "one", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"},
+        {"scene": "one", "source": "synthetic", "path": long, "methods": "livescene"},
         {"scene": "two", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"}])
     out = tmp_path / "snakemake.out"
     with out.open("w") as sink:
@@ -46,9 +51,10 @@ def test_a_stopped_run_says_to_run_the_same_command_again(tmp_path):
         while "rule capture:" not in out.read_text() and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)
         assert "rule capture:" in out.read_text(), out.read_text()[-2000:]
-        time.sleep(0.5)  # the job has started (rendering the tiny capture takes seconds)
+        time.sleep(1.0)  # the job has started (3000 frames take minutes to render)
         os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole process group
         proc.wait(timeout=120)
+    assert not (wf.root / "results" / "one" / "capture").exists()  # stopped mid-job
     output = out.read_text()
     assert proc.returncode != 0
     assert "the jobs of one did not finish: the run was stopped. Run the same command again" in output, output[-3000:]
