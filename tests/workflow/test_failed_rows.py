@@ -45,8 +45,10 @@ def test_a_stopped_run_says_to_run_the_same_command_again(tmp_path):
         {"scene": "two", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"}])
     out = tmp_path / "snakemake.out"
     with out.open("w") as sink:
+        # SIGINT at its default: a shell without job control (CI, `make test &`) starts its children ignoring it
         proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "1", "results/one/capture"],
-                                cwd=wf.root, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
+                                cwd=wf.root, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         deadline = time.monotonic() + 120
         while "rule capture:" not in out.read_text() and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)
