@@ -131,7 +131,9 @@ class SentenceTransformerEncoder(CachedEncoder):
         super().__init__(cache_dir)
 
     def _model(self):
-        """The network, loaded on first use: a run whose phrases are all in the cache never pays its ~10 s load."""
+        """The network, loaded on first use: a run whose phrases are all in the cache never pays for it (importing
+        sentence-transformers takes 8-10 s on a CPU, loading the model 0.4 s; docs/language.md,
+        "Benchmark (language targets)")."""
         if self._loaded is None:
             try:
                 from sentence_transformers import SentenceTransformer
