@@ -142,6 +142,14 @@ def test_colmap_takes_one_core(workflow_copy):
     assert not any(entry.startswith("poses=") for entry in profile("slurm")["set-threads"])
 
 
+def test_a_slurm_training_asks_for_the_cpus_its_torch_threads_use():
+    """The rule's threads are config train.threads (the torch threads a training runs); the SLURM profile asked 8
+    CPUs of every training, 6 of them idle for hours."""
+    assert not any(entry.startswith("train=") for entry in profile("slurm")["set-threads"])
+    rule = (REPO / "workflow" / "rules" / "model.smk").read_text()
+    assert 'threads: config["train"]["threads"]' in rule
+
+
 def test_a_plain_snakemake_run_at_the_root_uses_the_default_profile(tmp_path):
     """Snakemake looks for a workflow profile next to the main Snakefile (the root one): profiles/default there
     links workflow/profiles/default, so `snakemake --cores 2` schedules as `make run` does."""
