@@ -225,7 +225,7 @@ EOF
   say "submitting the tiny scene through workflow/profiles/slurm (results in $SCRATCH)"
   local start end rc=0
   start=$(date +%s)
-  # The profile asks for paper-scale threads and memory (8 CPUs, 32 GB for train); this node has $(nproc)
+  # The profile asks for paper-scale threads and memory (8 CPUs for evaluate, 32 GB for train); this node has $(nproc)
   # CPUs and $mem MB: threads are capped with --max-threads, memory with LIVESCENE_SLURM_MAX_MEM_MB.
   set +e
   LIVESCENE_SLURM_ACCOUNT=$ACCOUNT LIVESCENE_SLURM_MAX_MEM_MB=$((mem / 2)) \
