@@ -1,0 +1,75 @@
+"""Which frame a window keeps, how frames are named, which names are refused: rules stated in the code's own
+docstrings (docs/poses.md), each checked on a case small enough to work out by hand."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import cv2
+import pandas as pd
+import pytest
+from frames_testdata import blurred, textured_frame
+
+from stages.frames import FramesConfig, FrameSourceError, extract_frames
+from stages.frames.extraction import name_width
+from stages.frames.selection import indices_named_in
+
+
+def _folder(root: Path, images: dict[str, object]) -> Path:
+    folder = root / "shots"
+    folder.mkdir()
+    for name, image in images.items():
+        assert cv2.imwrite(str(folder / name), image)
+    return folder
+
+
+def _kept(folder: Path, out: Path, **options) -> list[int]:
+    extract_frames(FramesConfig(source=folder, out_dir=out, progress=False, **options))
+    return pd.read_csv(out / "frames.csv")["source_index"].tolist()
+
+
+def test_a_tie_in_a_window_keeps_the_earliest_frame(tmp_path: Path) -> None:
+    """Frames 0 and 2 are the same picture (lossless PNG: the same pixels, the same score), frame 1 a blur between
+    them, so neither copy is a repeat of the frame before it: the window of 3 keeps the earliest, as
+    ``sharpest_per_window`` does."""
+    sharp = textured_frame(0)
+    folder = _folder(tmp_path, {"frame_0000.png": sharp, "frame_0001.png": blurred(textured_frame(1), 2.0),
+                                "frame_0002.png": sharp})
+    assert _kept(folder, tmp_path / "frames", stride=3) == [0]
+
+
+def test_an_annotated_frame_is_matched_by_its_source_index_in_a_folder_with_gaps(tmp_path: Path) -> None:
+    """IMG_0010, IMG_0012, IMG_0013: source indices 10, 12, 13 at playback positions 0, 1, 2. The annotation names
+    frame 13 (blurred): the window keeps 13, not the sharper 10 or 12."""
+    folder = _folder(tmp_path, {"IMG_0010.png": textured_frame(0), "IMG_0012.png": textured_frame(1),
+                                "IMG_0013.png": blurred(textured_frame(2), 2.0)})
+    assert _kept(folder, tmp_path / "frames", stride=3, prefer=frozenset({13})) == [13]
+    # an index that is a playback position here (2) but names no frame of the folder changes nothing
+    assert _kept(folder, tmp_path / "other", stride=3, prefer=frozenset({2})) != [13]
+
+
+def test_masks_in_a_masks_subfolder_name_their_frames(tmp_path: Path) -> None:
+    """``--prefer-masked`` reads what the labels stage reads, a ``masks/`` subfolder included."""
+    annotations = tmp_path / "annotations"
+    (annotations / "masks").mkdir(parents=True)
+    (annotations / "mapping.yaml").write_text("1: door\n")
+    for name in ("frame_00012.png", "frame_00040.png", ".frame_00099.png"):  # hidden: no frame
+        (annotations / "masks" / name).write_bytes(b"")
+    assert indices_named_in(annotations) == {12, 40}
+
+
+@pytest.mark.parametrize(("n_frames", "width"), [(99_999, 5), (100_000, 5), (100_001, 6)])
+def test_a_video_names_its_frames_by_the_digits_of_its_largest_index(n_frames: int, width: int) -> None:
+    """A video of 100 000 frames has indices 0 .. 99 999: five digits are enough; one more frame needs six."""
+    assert name_width(SimpleNamespace(n_declared=n_frames)) == width
+
+
+@pytest.mark.parametrize("names", [["take1_0002.jpg", "take2_0001.jpg"],  # numbers one apart
+                                   ["Take1_0005.jpg", "take2_0001.jpg"]])  # one name form, spelled in two cases
+def test_numbers_against_the_name_order_are_refused(tmp_path: Path, names: list[str]) -> None:
+    folder = _folder(tmp_path, {name: textured_frame(k) for k, name in enumerate(names)})
+    with pytest.raises(FrameSourceError, match=rf"{names[1]} comes after {names[0]} by name but carries the smaller "
+                                               r"frame number"):
+        extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
+    assert not (tmp_path / "frames").exists()
