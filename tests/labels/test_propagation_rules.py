@@ -113,3 +113,25 @@ def test_confidence_csv_names_the_nearer_annotation(label_files) -> None:
     table = pd.read_csv(out / "confidence.csv", dtype=str, keep_default_na=False).set_index("frame")
     assert table.loc["00002", "nearest_key"] == "00000" and table.loc["00004", "nearest_key"] == "00006"
     assert table.loc["00002", "distance"] == table.loc["00004", "distance"] == "1"
+
+
+class UnclosedFlows:
+    """No motion forward, but the flow back is off by ``miss`` px in x: each step's round trip misses by it."""
+
+    def __init__(self, miss: float) -> None:
+        self.miss = miss
+
+    def sample(self, i: int, j: int, pos: np.ndarray) -> np.ndarray:
+        back = np.array([self.miss if j < i else 0.0, 0.0], np.float32)
+        return np.broadcast_to(back, pos.shape).astype(np.float32)
+
+
+def test_a_round_trip_that_misses_is_an_occlusion_past_the_tolerance_and_widens_sigma_below_it() -> None:
+    """One step, |w| = 0, |w_back| = m: occluded when m^2 > 0.01 m^2 + 0.5. m = 0.8: 0.64 > 0.5064, confidence 0.
+    m = 0.6: 0.36 <= 0.5036, kept, sigma^2 = 0.5^2 + 0.36 / 4 = 0.34; column 4 lands on column 4, d = 1."""
+    key = {1: make_key_frame(1, halves(1))}
+    occluded = propagate_to(UnclosedFlows(0.8), key, 0, n_labels=2)
+    np.testing.assert_array_equal(occluded.confidence, 0.0)
+    kept = propagate_to(UnclosedFlows(0.6), key, 0, n_labels=2)
+    np.testing.assert_array_equal(kept.labels[0], halves(1)[0])
+    assert kept.confidence[0, 4] == pytest.approx(phi(0.5 / math.sqrt(0.34)), abs=1e-4)  # Phi(0.8575) = 0.804
