@@ -109,3 +109,18 @@ def test_a_frame_labelled_twice_is_refused(label_files) -> None:
         ingest_labels(LabelsConfig(input=src, frames=label_files.frames, out=out, progress=False,
                                    missing_masks="leave"))
     assert not out.exists()
+
+
+def test_an_id_map_whose_red_channel_alone_differs_is_refused(tmp_path: Path) -> None:
+    """Blue and green equal, red not (cv2 writes B, G, R): colours, not one id per pixel."""
+    import cv2
+
+    from stages.labels.name_table import NameTable
+    from stages.labels.png_labels import read_png_labels
+
+    ids = np.zeros((4, 6), np.uint8)
+    ids[:, :3] = 3
+    assert cv2.imwrite(str(tmp_path / "frame_00000.png"), np.dstack([ids, ids, ids // 3]))
+    label_set = read_png_labels(tmp_path, NameTable(ids=(3,), names=("door",), path=None))
+    with pytest.raises(LabelError, match="id map has colour channels that differ"):
+        label_set.entries[0].load()
