@@ -73,3 +73,20 @@ def test_numbers_against_the_name_order_are_refused(tmp_path: Path, names: list[
                                                r"frame number"):
         extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
     assert not (tmp_path / "frames").exists()
+
+
+def test_a_single_labelme_file_names_its_image(tmp_path: Path) -> None:
+    """LabelMe's file names the image it annotates (imagePath); its own name may carry no number."""
+    path = tmp_path / "annotation.json"
+    path.write_text('{"shapes": [], "imagePath": "../rgb/IMG_14.jpg", "imageHeight": 4, "imageWidth": 6}')
+    assert indices_named_in(path) == {14}
+
+
+def test_a_frame_after_a_damaged_one_is_no_repeat(tmp_path: Path) -> None:
+    """A, (damaged), A: a repeat is a frame identical to the frame before it, and the frame before the second A
+    is the damaged one."""
+    folder = _folder(tmp_path, {"frame_0000.png": textured_frame(0), "frame_0002.png": textured_frame(0)})
+    (folder / "frame_0001.png").write_bytes(b"")
+    summary = extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
+    assert summary["dropped_frame_count"] == 1 and summary["repeated_frame_count"] == 0
+    assert summary["kept_repeats"] == []
