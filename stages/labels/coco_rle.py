@@ -2,8 +2,8 @@
 
 COCO stores a mask as run lengths over the pixels in column-major (Fortran)
 order, starting with a run of zeros. The compressed form packs each count into
-5-bit groups written as printable characters (offset 48); from the third count
-on, the difference to the count two places back is stored instead, so long
+5-bit groups written as printable characters (offset 48); from the fourth count
+on (pycocotools: `i > 2`), the difference to the count two places back is stored instead, so long
 alternating runs stay short. Both directions are here so tests can write RLE
 that real COCO files would hold.
 """
