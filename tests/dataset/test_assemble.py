@@ -293,3 +293,30 @@ def test_the_poses_applied_transform_is_kept(tmp_path):
     _rewrite_poses(paths, lambda d: d.update(applied_transform=applied))
     assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds", progress=False))
     assert json.loads((tmp_path / "ds" / "transforms.json").read_text())["applied_transform"] == applied
+
+
+def test_poses_for_frames_of_another_aspect_ratio_are_refused(tmp_path):
+    """Poses for 32x18 images, frames of 16x12: half the width but two thirds of the height, so no resize."""
+    paths = make_stage_outputs(tmp_path)
+    _rewrite_poses(paths, lambda d: d.update(w=32, h=18))
+    with pytest.raises(SceneError, match=r"poses are for 32x18 images but the frames are 16x12"):
+        assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds",
+                                      progress=False))
+
+
+def test_per_frame_intrinsics_for_frames_twice_the_size_are_halved(tmp_path):
+    """Each frame's own camera for 32x24 images (fl 40, principal point (16, 12)) describes the 16x12 frames as
+    fl 20 at (8, 6): every intrinsic halves with the image."""
+    paths = make_stage_outputs(tmp_path)
+
+    def per_frame_at_twice_the_size(d: dict) -> None:
+        for k in ("fl_x", "fl_y", "cx", "cy", "w", "h"):
+            d.pop(k)
+        for f in d["frames"]:
+            f.update({"fl_x": 40.0, "fl_y": 40.0, "cx": 16.0, "cy": 12.0, "w": 32, "h": 24})
+
+    _rewrite_poses(paths, per_frame_at_twice_the_size)
+    ds = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], out=tmp_path / "ds",
+                                       progress=False))
+    expected = Camera(fx=20.0, fy=20.0, cx=8.0, cy=6.0, width=W, height=H)
+    assert all(ds.camera_of(f) == expected for f in ds.frames)

@@ -141,3 +141,25 @@ def test_images_outside_the_dataset_are_brought_into_the_copy(tiny_dataset: Scen
     assert how.turned
     assert [f.file_path for f in ds.frames] == [f"images/{Path(p['file_path']).name}" for p in data["frames"]]
     assert all(ds.image_path(f).is_file() and ds.image_path(f).parent == ds.root / "images" for f in ds.frames)
+
+
+def test_the_axis_misalignment_is_that_of_the_worst_axis() -> None:
+    """A turn of 20 degrees about z leaves z on its axis and moves x and y 20 degrees off theirs: the dataset is
+    20 degrees off (not 0: a turn about one axis would otherwise read as aligned and never be undone)."""
+    assert axis_misalignment_deg(Rotation.from_euler("z", 20.0, degrees=True).as_matrix()) == pytest.approx(20.0)
+
+
+def test_a_turn_composes_onto_the_applied_transform_already_recorded(tiny_dataset: SceneDataset,
+                                                                    tmp_path: Path) -> None:
+    """nerfstudio's applied_transform maps the original world to the poses' world; turning them again by M maps
+    the original world by M @ applied, so a viewer can still undo both."""
+    old_from_room = Rotation.from_euler("xyz", [24.0, -11.0, 37.0], degrees=True).as_matrix()
+    applied = np.eye(4)
+    applied[:3, :3] = Rotation.from_euler("x", -90.0, degrees=True).as_matrix()  # ns-process-data's kind of record
+    applied[:3, 3] = [0.5, 0.0, -1.0]
+    tiny_dataset.nerfstudio["applied_transform"] = applied[:3].tolist()
+    src = _ready_dataset(tiny_dataset, old_from_room, np.array([4.0, -2.0, 7.0]))
+    ds, how = orient_dataset(src, tmp_path / "oriented")
+    assert how.turned
+    np.testing.assert_allclose(np.asarray(ds.nerfstudio["applied_transform"]), (how.new_from_old @ applied)[:3],
+                               atol=1e-12)
