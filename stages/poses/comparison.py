@@ -111,8 +111,14 @@ def compare_poses(pred_path: Path, truth_path: Path, extent: float | None = None
     else:
         raise ValueError(f"unknown alignment {align!r}; use 'poses' or 'centres'")
     if sim3 is None:
-        raise InputError(pred_path, "no similarity aligns the camera centres (degenerate configuration)",
-                         "check that the cameras move (centres must not coincide)")
+        if min(np.ptp(pred_c, axis=0).max(), np.ptp(truth_c, axis=0).max()) < 1e-12:
+            raise InputError(pred_path, "no similarity aligns the camera centres (degenerate configuration)",
+                             "check that the cameras move (centres must not coincide)")
+        # both sets move, yet no rotation with a positive scale maps one onto the other: a mirror image
+        raise InputError(pred_path, f"no similarity aligns the camera centres with {truth_set.path}: the cameras "
+                         "move in both, so one world is probably the mirror image of the other (a handedness flip)",
+                         "check both files' conventions (a transforms.json holds OpenGL camera-to-world matrices, a "
+                         "COLMAP model world-to-camera ones with OpenCV axes) and that no axis was negated")
     scale = float(np.cbrt(np.linalg.det(sim3[:3, :3])))
     rot = sim3[:3, :3] / scale
     aligned = truth_c @ sim3[:3, :3].T + sim3[:3, 3]
