@@ -45,3 +45,14 @@ def test_a_mirrored_world_is_not_aligned_away(tmp_path: Path) -> None:
         compare_poses(pred, _write(tmp_path / "truth.json", poses, camera), extent=4.0)
     # the cameras do move: the message names the mirror, not coinciding centres
     assert "mirror image" in str(err.value) and "check that the cameras move" not in str(err.value)
+
+
+def test_cameras_that_do_not_move_are_named_as_such(tmp_path: Path) -> None:
+    """Every camera at one centre (a tripod turning in place): no similarity is defined by the centres."""
+    poses = orbit_poses(8, arc_deg=120)
+    for p in poses:
+        p[:3, 3] = [0.5, -0.2, 1.0]
+    camera = camera_to_dict(SMALL_CAMERA)
+    with pytest.raises(InputError, match=r"degenerate configuration.*check that the cameras move"):
+        compare_poses(_write(tmp_path / "pred.json", poses, camera), _write(tmp_path / "truth.json", poses, camera),
+                      extent=4.0)
