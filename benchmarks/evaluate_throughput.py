@@ -33,18 +33,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import hashlib
 import io
 import json
 import os
 import statistics
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
-from demo_dataset import ROOT
 from stage_bench import (
     Row,
     add_input_arguments,
@@ -54,28 +50,11 @@ from stage_bench import (
     load_span,
     print_table,
     timed,
+    trained_run,
     work_folder,
 )
-from train_throughput import language_targets
 
 from stages.scene.machine import contention
-
-
-def trained_run(work: Path, dataset: Path, steps: int, overrides: list[str], language: bool) -> Path:
-    """A LiveScene run on ``dataset``, trained once into ``work`` (render_throughput.py's run by default)."""
-    name = f"run-livescene-{steps}"
-    if overrides or not language:
-        name += "-" + hashlib.sha1(json.dumps([overrides, language]).encode()).hexdigest()[:8]
-    run = work / name
-    if not (run / "model.pt").is_file():
-        cmd = [sys.executable, "-m", "stages.model", "train", "--data", str(dataset), "--method", "livescene",
-               "--preset", "cpu-demo", "--out", str(run), "--max-steps", str(steps), "--max-seconds", "0",
-               "--no-progress", "--resume"]
-        cmd += ["--language-targets", str(language_targets(work, dataset))] if language else []
-        for o in overrides:
-            cmd += ["--set", o]
-        subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
-    return run
 
 
 def main() -> int:

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import tempfile
 import time
@@ -30,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
+from stage_bench import peak_rss_mib
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -201,7 +201,7 @@ def main() -> int:
     result["loadavg"] = {k: [round(x, 2) for x in v] for k, v in load.items()}
     # this process's max RSS: the export, the video and the truth geometry they are compared with (and the
     # capture's rendering when it was not cached)
-    result["peak_rss_mib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
+    result["peak_rss_mib"] = round(peak_rss_mib(), 1)
     (args.work / "result.json").write_text(json.dumps(result, indent=2))
     print(json.dumps(result, indent=2))
     g, e = result["geometry"], result["export"]

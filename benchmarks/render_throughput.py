@@ -21,27 +21,14 @@ import csv
 import json
 import os
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-from demo_dataset import DEMO_SPEC, ROOT
-from stage_bench import dataset_folder, peak_rss_mib
-from train_throughput import language_targets
+from demo_dataset import DEMO_SPEC
+from stage_bench import dataset_folder, peak_rss_mib, trained_run
 
 from stages.scene.machine import machine_info
-
-
-def trained_run(work: Path, dataset: Path, steps: int) -> Path:
-    run = work / f"run-livescene-{steps}"
-    if not (run / "model.pt").is_file():
-        subprocess.run([sys.executable, "-m", "stages.model", "train", "--data", str(dataset), "--method", "livescene",
-                        "--preset", "cpu-demo", "--out", str(run), "--max-steps", str(steps), "--max-seconds", "0",
-                        "--language-targets", str(language_targets(work, dataset)), "--no-progress", "--resume"],
-                       check=True, cwd=ROOT)
-    return run
 
 
 def training_rays_per_s(run: Path) -> float | None:

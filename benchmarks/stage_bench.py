@@ -9,6 +9,8 @@ would otherwise be the peak of a benchmark that only reads a video.
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import math
 import os
 import resource
@@ -22,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from demo_dataset import DEMO_SPEC, ROOT
+from train_throughput import language_targets
 
 from stages.scene.machine import contention, machine_info, machine_line
 
@@ -81,6 +84,26 @@ def frames_folder(work: Path, spec: Path) -> Path:
         _livescene("stages.frames", "--video", str(capture / "video.mp4"), "--out", str(frames), "--count", "300",
                    "--max-side", "960")
     return frames
+
+
+def trained_run(work: Path, dataset: Path, steps: int, overrides: tuple[str, ...] | list[str] = (),
+                language: bool = True) -> Path:
+    """A LiveScene run (cpu-demo) on ``dataset``, trained once into ``work`` in a child process; the plain run
+    (with the language table, no overrides) is ``run-livescene-<steps>``, which the render and evaluation
+    benchmarks share."""
+    name = f"run-livescene-{steps}"
+    if overrides or not language:
+        name += "-" + hashlib.sha1(json.dumps([list(overrides), language]).encode()).hexdigest()[:8]
+    run = work / name
+    if not (run / "model.pt").is_file():
+        cmd = [sys.executable, "-m", "stages.model", "train", "--data", str(dataset), "--method", "livescene",
+               "--preset", "cpu-demo", "--out", str(run), "--max-steps", str(steps), "--max-seconds", "0",
+               "--no-progress", "--resume"]
+        cmd += ["--language-targets", str(language_targets(work, dataset))] if language else []
+        for o in overrides:
+            cmd += ["--set", o]
+        subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    return run
 
 
 @dataclass

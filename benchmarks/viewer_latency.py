@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import statistics
 import sys
@@ -37,6 +36,7 @@ import time
 from pathlib import Path
 
 import this_checkout  # noqa: F401  (this checkout's stages, here and in subprocesses)
+from stage_bench import peak_rss_mib
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "viewer")]
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         viewer.stop()
         shutil.rmtree(profile, ignore_errors=True)
     results["load_after"] = loadavg()
-    results["peak_rss_mib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)  # the viewer's
+    results["peak_rss_mib"] = round(peak_rss_mib(), 1)  # the viewer's
     print(json.dumps(results))
     moves = results["moves"]
     for key in ("end_to_end_s", "to_server_s", "server_s", "render_s", "to_browser_s"):

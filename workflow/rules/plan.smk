@@ -258,32 +258,29 @@ def check_local_gpu(device):
                             "CPU), or add --config device=cpu gpus=0")
 
 
-def run_stopped(logfiles):
-    """Whether this run was stopped (Ctrl-C, or SIGTERM: a user's or a cluster's cancel) rather than failed, from
-    what Snakemake logs when it stops on request."""
-    marks = ("Terminating processes on user request", "Will exit after finishing currently running jobs")
+def log_text(logfiles):
+    """Snakemake's own log of this run (the ``log`` of onerror), as one text; a file it cannot read counts empty."""
+    texts = []
     for name in logfiles or []:
         try:
-            text = Path(name).read_text(errors="replace")
+            texts.append(Path(name).read_text(errors="replace"))
         except OSError:
             continue
-        if any(mark in text for mark in marks):
-            return True
-    return False
+    return "\n".join(texts)
 
 
-def failed_scenes(logfiles):
-    """The selected scenes of this run's failed jobs, read from Snakemake's own log: each error block names the
-    failing job's log file, and a scene's job logs are <results>/<scene>/logs/."""
+def run_stopped(text):
+    """Whether the run whose log ``text`` is was stopped (Ctrl-C, or SIGTERM: a user's or a cluster's cancel)
+    rather than failed, from what Snakemake logs when it stops on request."""
+    marks = ("Terminating processes on user request", "Will exit after finishing currently running jobs")
+    return any(mark in text for mark in marks)
+
+
+def failed_scenes(text):
+    """The selected scenes of a run's failed jobs, read from Snakemake's own log ``text``: each error block names
+    the failing job's log file, and a scene's job logs are <results>/<scene>/logs/."""
     import re
 
     # a job's start names its log too: only an error block's line ends with Snakemake's hint
     pattern = re.compile(rf"^\s+log: {re.escape(str(Path(RESULTS)))}/([^/\s]+)/logs/.*\(check log file", re.MULTILINE)
-    found = []
-    for name in logfiles or []:
-        try:
-            found += pattern.findall(Path(name).read_text(errors="replace"))
-        except OSError:
-            continue
-    return [s for s in dict.fromkeys(found) if s in SELECTED]
-
+    return [s for s in dict.fromkeys(pattern.findall(text)) if s in SELECTED]
