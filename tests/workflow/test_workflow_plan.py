@@ -3,11 +3,14 @@ with errors that name the file, the key and the row."""
 
 from __future__ import annotations
 
+import json
 import re
+import shlex
 
 import cv2
 import numpy as np
 import pytest
+import yaml
 from workflow_copy import WorkflowCopy
 
 from stages.scene import write_yaml
@@ -15,12 +18,78 @@ from stages.scene import write_yaml
 PIPELINE = {"capture", "frames", "poses", "pose_compare", "labels", "states", "assemble"}
 
 
-def test_default_demo_runs_every_stage(workflow_copy):
-    jobs = workflow_copy.dry_run().jobs()
+def plan_of(run, scene: str) -> dict[str, bool]:
+    """Rule -> needed, from the plan the scene's report page is given (report_scene's --plan-json)."""
+    (text,) = run.scene_jobs(scene)["report_scene"]
+    words = shlex.split(text.split("Shell command:", 1)[1].splitlines()[0])
+    return {rule: entry["needed"] for rule, entry in json.loads(words[words.index("--plan-json") + 1]).items()}
+
+
+def manifest_of(run, scene: str) -> dict:
+    """The report page's inputs by role (report_scene's manifest, written to inputs.json)."""
+    (text,) = run.scene_jobs(scene)["report_scene"]
+    return json.loads(shlex.split(text.split("Shell command:", 1)[1].splitlines()[0])[2])
+
+
+@pytest.fixture(scope="module")
+def demo_plan(tmp_path_factory):
+    """`snakemake -n` of the default sheet and config: the demo capture with truth, every item its own."""
+    return WorkflowCopy(tmp_path_factory.mktemp("demo") / "wf").dry_run()
+
+
+def test_default_demo_runs_every_stage(demo_plan):
+    jobs = demo_plan.jobs()
     for rule in PIPELINE | {"language_targets", "sweep", "control", "stability", "report_scene", "report_index"}:
         assert jobs.get(rule) == 1, (rule, jobs)
     assert jobs["train"] == 3 and jobs["evaluate"] == 3  # livescene, mk-planes, conerf
     assert "capture_dataset" not in jobs and "scene_validate" not in jobs and "dataset_orient" not in jobs
+
+
+def test_the_demo_plan_and_commands_follow_its_row_and_the_config(demo_plan):
+    """The default row (a synthetic capture, poses estimated, every item the capture's own, truth) and config
+    (methods livescene, mk-planes, conerf; sweeps and exports of livescene only; the stability suite)."""
+    trained = ("livescene", "mk-planes", "conerf")
+    needed = {"capture", "frames", "poses", "pose_compare", "labels", "states", "assemble", "exposure",
+              "language_targets", "sweep[livescene]", "control[livescene]", "export[livescene]", "stability",
+              *(f"{rule}[{m}]" for rule in ("train", "evaluate") for m in trained)}
+    plan = plan_of(demo_plan, "demo")
+    assert {rule for rule, wanted in plan.items() if wanted} == needed
+    assert {"capture_dataset", "poses_import", "dataset_orient", "scene_validate", "train[k-planes]",
+            "export[mk-planes]", "control[conerf]"} <= {rule for rule, wanted in plan.items() if not wanted}
+    jobs = demo_plan.scene_jobs("demo")
+    assert len(jobs["export"]) == 1 and "--method" not in jobs["export"][0]  # export.methods: [livescene]
+    assert "--run results/demo/runs/livescene --" in jobs["export"][0] and "--objects" in jobs["export"][0]
+    # the capture's own items: its masks keep COLMAP off the objects, its names, key frames and prompts
+    assert "--masks results/demo/capture/masks " in jobs["poses"][0]
+    assert "--input results/demo/capture/masks --mapping results/demo/capture/mapping.yaml " in jobs["labels"][0]
+    assert ("--key-frames results/demo/capture/key_frame_value.yaml --mapping results/demo/capture/mapping.yaml "
+            in jobs["states"][0])
+    assert "--prompts results/demo/capture/prompts.yaml " in jobs["assemble"][0]
+    # truth: the evaluation tests unseen combinations in the frame of the estimated poses
+    assert len(jobs["evaluate"]) == 3 and all(
+        "--truth results/demo/capture --pose-alignment results/demo/pose_error.json " in t for t in jobs["evaluate"])
+    targets = [t for t in jobs["train"] if "--language-targets results/demo/language/targets.npz " in t]
+    assert len(targets) == 1 and "--method livescene " in targets[0]  # only LiveScene has a language table
+    manifest = manifest_of(demo_plan, "demo")
+    assert manifest["stability"] == "results/stability/summary.json" and manifest["pose_error"].endswith(
+        "results/demo/pose_error.json")
+    assert set(manifest["export"]) == set(manifest["sweep"]) == set(manifest["control"]) == {"livescene"}
+    assert set(manifest["runs"]) == set(manifest["eval"]) == set(trained)
+
+
+def test_stability_and_exports_left_out_by_the_config(workflow_copy):
+    """stability.run false and export.methods [] leave their jobs out of the plan, the targets and the page."""
+    config = yaml.safe_load((workflow_copy.root / "config" / "config.yaml").read_text())
+    chosen = workflow_copy.write_config(stability={**config["stability"], "run": False},
+                                        export={**config["export"], "methods": []})
+    run = workflow_copy.dry_run("--configfile", str(chosen))
+    jobs = run.jobs()
+    assert "stability" not in jobs and "export" not in jobs and jobs["sweep"] == 1, jobs
+    plan = plan_of(run, "demo")
+    assert not plan["stability"] and not plan["export[livescene]"] and plan["sweep[livescene]"]
+    manifest = manifest_of(run, "demo")
+    assert "stability" not in manifest and "export" not in manifest and "stability_benchmark" not in manifest
+    assert "results/stability" not in run.output
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +122,9 @@ def mixed_plan(tmp_path_factory):
            "masks": "no", "key_frames": "no", "names": "no", "truth": "yes", "methods": "livescene"}
           for poses in ("given", "estimate")),
         {"scene": "baseline", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
-         "truth": "yes", "methods": "mk-planes"}])
+         "truth": "yes", "methods": "mk-planes"},
+        {"scene": "unmasked", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
+         "masks": "no", "names": "no", "truth": "yes", "methods": "mk-planes"}])
     return wf.dry_run()
 
 
@@ -109,6 +180,39 @@ def test_a_synthetic_room_filmed_without_masks_and_key_frames_is_a_static_field(
     for jobs in (given, estimated):
         assert not any("--truth" in t for t in jobs["evaluate"]) and "--state-mode learned" in jobs["train"][0]
     assert "--no-masks" not in mixed_plan.scene_jobs("given")["capture_dataset"][0]
+
+
+def test_a_synthetic_room_filmed_without_masks_keeps_its_states_and_its_truth_test(mixed_plan):
+    """Key frames without masks (a baseline that reads every state everywhere): the dataset leaves out the masks
+    only, and the objects' states still let the evaluation test unseen combinations against the truth."""
+    jobs = mixed_plan.scene_jobs("unmasked")
+    assert "--no-masks" in jobs["capture_dataset"][0] and "--no-states" not in jobs["capture_dataset"][0]
+    assert all("--truth results/unmasked/capture " in t for t in jobs["evaluate"])
+    assert "--state-mode learned" not in jobs["train"][0]
+
+
+def test_the_plan_of_each_kind_of_row(mixed_plan):
+    """docs/workflow.md, "The DAG": which rules each kind of row leaves out."""
+    trained = {"train[livescene]", "evaluate[livescene]", "sweep[livescene]", "export[livescene]", "exposure",
+               "stability"}
+    expected = {
+        "ready": trained | {"scene_validate", "dataset_orient", "language_targets", "control[livescene]",
+                            "train[k-planes]", "evaluate[k-planes]"},
+        "filmed": trained | {"frames", "poses", "labels", "states", "assemble"},  # no names, no truth
+        "given": trained | {"capture", "capture_dataset", "language_targets", "control[livescene]"},
+        "staticestimate": trained | {"capture", "frames", "poses", "pose_compare", "assemble"},
+        "baseline": {"capture", "capture_dataset", "train[mk-planes]", "evaluate[mk-planes]", "exposure",
+                     "stability"},
+    }
+    expected["unmasked"] = expected["baseline"]
+    for scene, rules in expected.items():
+        plan = plan_of(mixed_plan, scene)
+        assert {rule for rule, wanted in plan.items() if wanted} == rules, scene
+    # each evaluation says what it tests (the page's plan table), from the truth and the objects the row has
+    (report,) = mixed_plan.scene_jobs("staticgiven")["report_scene"]
+    assert "held-out views only: no objects to test against the truth" in report
+    (report,) = mixed_plan.scene_jobs("filmed")["report_scene"]
+    assert "held-out views only: no truth" in report and "no objects" not in report
 
 
 def test_config_error_names_file_key_and_type(workflow_copy):
@@ -392,6 +496,25 @@ def test_only_builds_the_named_scenes(workflow_copy):
     assert bad.code != 0 and "to build some scenes of the sheet, name them with --config only=b" in bad.output
 
 
+def test_only_lists_pages_of_earlier_runs_apart_and_names_the_scenes_without_one(workflow_copy):
+    """An earlier page counts when both its summary and its page are there; a scene with only one of them (a run
+    stopped between the two, a page deleted) has no page to list."""
+    tiny = {"source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"}
+    workflow_copy.write_scenes([{"scene": s, **tiny} for s in ("built", "summary", "page", "new", "now")])
+    for scene in ("built", "summary"):
+        summary = workflow_copy.root / "results" / scene / "report" / "summary.json"
+        summary.parent.mkdir(parents=True)
+        summary.write_text("{}")
+    for scene in ("built", "page"):
+        page = workflow_copy.root / "reports" / "scenes" / f"{scene}.html"
+        page.parent.mkdir(parents=True, exist_ok=True)
+        page.write_text("<html></html>")
+    run = workflow_copy.dry_run("--config", "only=now")
+    (index,) = [text for rule, text in run.blocks() if rule == "report_index"]
+    command = index.split("Shell command:", 1)[1]
+    assert "--earlier results/built/report/summary.json --pending summary,page,new " in command
+
+
 def test_a_wrong_row_not_selected_does_not_hold_up_the_others(workflow_copy, tmp_path):
     workflow_copy.write_scenes([
         {"scene": "a", "source": "synthetic", "path": "config/captures/tiny.yaml", "methods": "livescene"},
@@ -451,3 +574,63 @@ def test_appearance_correction_reaches_every_training(workflow_copy):
         jobs = plan["train"]
         assert len(jobs) == 3 and all(f"--set model.appearance.mode={mode}" in t for t in jobs)
         assert len(plan["exposure"]) == 1 and all("--exposure results/demo/exposure.json" in t for t in jobs)
+
+
+def test_sheet_cells_that_only_look_wrong_are_accepted(workflow_copy, tmp_path):
+    """A spreadsheet's BOM, `*` in state_ranges, a mapping.yaml one folder above the id maps, one mask folder per
+    object (named by its folders) with `names: no`, and a COLMAP model folder with a colon in its path."""
+    video, keys, names = tmp_path / "room.mp4", tmp_path / "keys.csv", tmp_path / "mapping.yaml"
+    video.write_bytes(b"")  # a dry run only needs the paths to exist
+    keys.write_text("frame,object,value\n0,door,0\n")
+    names.write_text("{1: door}")
+    maps = tmp_path / "annotations" / "masks"
+    maps.mkdir(parents=True)
+    (maps / "frame_00000.png").write_bytes(b"")
+    (maps.parent / "mapping.yaml").write_text("{1: door}")
+    per_object = tmp_path / "per_object" / "door"
+    per_object.mkdir(parents=True)
+    (per_object / "frame_00000.png").write_bytes(b"")
+    shots, model = tmp_path / "shots", tmp_path / "run:2" / "sparse"
+    shots.mkdir()
+    model.mkdir(parents=True)
+    row = {"source": "video", "path": video, "key_frames": keys, "truth": "no", "methods": "livescene"}
+    sheet = workflow_copy.write_scenes([
+        {"scene": "star", "masks": maps, "names": names, "state_ranges": "*=0,90", **row},
+        {"scene": "parent", "masks": maps, "names": "no", **row},
+        {"scene": "objects", "masks": per_object.parent, "names": "no", **row},
+        {"scene": "model", "source": "images", "path": shots, "poses": f"colmap:{model}", "masks": "no",
+         "key_frames": "no", "names": "no", "methods": "mk-planes"}])
+    sheet.write_text("\ufeff" + sheet.read_text(), encoding="utf-8")  # "CSV UTF-8" of a spreadsheet
+    plan = workflow_copy.dry_run()
+    assert "--range '*=0,90'" in plan.scene_jobs("star")["states"][0]
+    assert {"labels", "states", "assemble"} <= set(plan.scene_jobs("parent")) and plan.scene_jobs("objects")
+    assert f"--model {model} " in plan.scene_jobs("model")["poses_import"][0]
+
+
+def test_sheet_cells_that_are_wrong_for_their_row_are_refused(workflow_copy, tmp_path):
+    video, keys = tmp_path / "room.mp4", tmp_path / "keys.csv"
+    video.write_bytes(b"")
+    keys.write_text("frame,object,value\n0,door,0\n")
+    (tmp_path / "shots").mkdir()
+    (tmp_path / "masks").mkdir()
+    filmed = {"source": "video", "path": video, "masks": tmp_path / "masks", "key_frames": keys, "names": "no"}
+    workflow_copy.write_scenes([
+        {"scene": "posedvideo", "poses": "given", **filmed},
+        {"scene": "posedshots", **filmed, "source": "images", "path": tmp_path / "shots", "poses": "given"},
+        {"scene": "flat", "state_ranges": "door=5,5", **filmed},
+        {"scene": "keyless", **filmed, "masks": "no", "key_frames": "no", "methods": "mk-planes",
+         "state_ranges": "door=0,1"},
+        {"scene": "truthful", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
+         "truth": "yes", "state_ranges": "drawer=0,1"}])
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    assert "line 2 (scene 'posedvideo'): column 'poses': a video source has no poses to give" in run.output
+    assert "line 3 (scene 'posedshots'): column 'poses': a images source has no poses to give" in run.output
+    assert "line 4 (scene 'flat'): column 'state_ranges': 'door=5,5' has LO 5 not below HI 5" in run.output
+    for line, scene in ((5, "keyless"), (6, "truthful")):  # no states stage interpolates their key frames
+        assert f"line {line} (scene '{scene}'): column 'state_ranges': only key frames that the states stage" \
+            in run.output
+    sheet = workflow_copy.root / "config" / "scenes.tsv"
+    sheet.write_text(sheet.read_text().splitlines()[0] + "\n")  # the header alone
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0 and "- no scene rows" in run.output
