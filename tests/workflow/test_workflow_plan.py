@@ -634,3 +634,19 @@ def test_sheet_cells_that_are_wrong_for_their_row_are_refused(workflow_copy, tmp
     sheet.write_text(sheet.read_text().splitlines()[0] + "\n")  # the header alone
     run = workflow_copy.snakemake("-n", "--cores", "1")
     assert run.code != 0 and "- no scene rows" in run.output
+
+
+def test_a_synthetic_row_with_given_poses_is_refused_what_a_filmed_one_is(workflow_copy):
+    """Its dataset is written from the capture leaving out what the row leaves out (capture dataset --no-masks), so
+    its items pair as a filmed row's: key frames without masks had passed the sheet and failed LiveScene's training
+    after the capture ("no training frame has a mask")."""
+    tiny = {"source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given", "truth": "yes"}
+    workflow_copy.write_scenes([
+        {"scene": "unmasked", "masks": "no", "names": "no", "methods": "livescene", **tiny},
+        {"scene": "baseline", "masks": "no", "names": "no", "methods": "mk-planes", **tiny},
+        {"scene": "static", "masks": "no", "key_frames": "no", "methods": "mk-planes", **tiny}])
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    assert "line 2 (scene 'unmasked'): column 'masks': 'no', but ['livescene'] learn which pixels" in run.output
+    assert "line 4 (scene 'static'): column 'names': the row has neither masks nor key frames" in run.output
+    assert "(scene 'baseline')" not in run.output

@@ -197,7 +197,7 @@ def _item_problems(record, kind, poses):
         if prompts not in ("", "yes", "no"):
             problems.append(f"column 'prompts': a ready dataset's prompts are its prompts.yaml, and {prompts!r} "
                             "would not be read; fix: copy it into the dataset folder as prompts.yaml and write 'yes'")
-    if not frames_assembled(kind, poses):
+    if not frames_assembled(kind, poses) and kind != "synthetic":  # its dataset leaves out what the row does
         return problems
     needs_masks = sorted(set(methods) & {"livescene", "conerf"})
     if masks == "no" and keys != "no" and needs_masks:
