@@ -650,3 +650,14 @@ def test_a_synthetic_row_with_given_poses_is_refused_what_a_filmed_one_is(workfl
     assert "line 2 (scene 'unmasked'): column 'masks': 'no', but ['livescene'] learn which pixels" in run.output
     assert "line 4 (scene 'static'): column 'names': the row has neither masks nor key frames" in run.output
     assert "(scene 'baseline')" not in run.output
+
+
+def test_a_quoted_number_of_a_config_file_stays_an_error(workflow_copy):
+    """Only `--config` values are read again as numbers (Snakemake's loader makes them text); a config file's
+    quoted number is the user's mistake, named."""
+    quoted = workflow_copy.write_config(train={"steps": "61"})
+    run = workflow_copy.snakemake("-n", "--cores", "1", "--configfile", str(quoted))
+    assert run.code != 0 and "key 'train.steps': '61' is not of type 'integer'" in run.output
+    assert "--config" not in run.output.split("invalid workflow config in")[1].splitlines()[0]  # none was given
+    run = workflow_copy.snakemake("-n", "--cores", "1", "--config", "train={steps: true}")
+    assert run.code != 0 and "key 'train.steps'" in run.output

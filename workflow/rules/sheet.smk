@@ -33,7 +33,7 @@ def _from_command_line(cfg, schema):
     """Typed values for the scalars that `--config` gave as text: Snakemake reads a nested value
     (`--config train='{steps: 3000}'`) with YAML's base loader, so 3000 arrives as '3000'. Only values of
     the command line are read again; a config file's quoted number stays an error."""
-    given = workflow.config_settings.overwrite_config or {}
+    given = dict(workflow.config_settings.config)  # overwrite_config holds the --configfile values too
     for error in list(jsonschema.Draft202012Validator(schema).iter_errors(cfg)):
         path = list(error.absolute_path)
         wanted = SCALAR_TYPES.get(error.validator_value) if error.validator == "type" else None
@@ -64,7 +64,7 @@ def _check_config(cfg):
     schema = yaml.safe_load((SCHEMAS / "config.schema.yaml").read_text())
     errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(cfg), key=lambda e: list(e.absolute_path))
     files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
-    if workflow.config_settings.overwrite_config:
+    if workflow.config_settings.config:
         files.append("--config")
     lines = "\n".join(f"  - {_schema_problem(e)}" for e in errors)
     raise WorkflowError(f"invalid workflow config in {', '.join(files)}:\n{lines}\n"
