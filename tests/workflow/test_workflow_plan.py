@@ -97,9 +97,11 @@ def mixed_plan(tmp_path_factory):
     """One dry run of four scenes: ready datasets with and without names, a filmed video without names,
     and a synthetic capture whose poses are given."""
     root = tmp_path_factory.mktemp("mixed")
-    named, unnamed = root / "named", root / "unnamed"  # a dry run only needs the folders to exist
-    named.mkdir()
-    unnamed.mkdir()
+    named, unnamed, learned = root / "named", root / "unnamed", root / "learned"  # a dry run needs them to exist
+    for folder in (named, unnamed, learned):
+        folder.mkdir()
+    (learned / "mapping.yaml").write_text("1: door\n")
+    (learned / "key_frame_value.yaml").write_text("frame_00000: {door: 0.0}\n")
     video = root / "room.mp4"
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 5, (32, 24))
     for i in range(4):
@@ -114,6 +116,8 @@ def mixed_plan(tmp_path_factory):
          "names": "yes", "truth": "no", "methods": "livescene,k-planes"},
         {"scene": "plain", "source": "dataset", "path": unnamed, "poses": "given", "names": "no",
          "methods": "livescene"},
+        {"scene": "learned", "source": "dataset", "path": learned, "poses": "given", "key_frames": "no",
+         "names": "no", "methods": "livescene"},
         {"scene": "filmed", "source": "video", "path": video, "poses": "estimate", "masks": root / "masks",
          "key_frames": root / "keys.yaml", "names": "no", "truth": "no", "methods": "livescene"},
         {"scene": "given", "source": "synthetic", "path": "config/captures/tiny.yaml", "poses": "given",
@@ -139,6 +143,13 @@ def test_ready_dataset_with_poses_skips_frames_and_poses(mixed_plan):
     assert not any("--truth" in text for text in jobs["evaluate"])  # no truth: no truth-based evaluation
     assert any("--method k-planes" in t for t in jobs["train"])
     assert not any("--method mk-planes" in t for t in jobs["train"])
+
+
+def test_a_ready_dataset_without_key_frames_learns_its_states(mixed_plan):
+    """`key_frames: no` on a ready dataset: its transforms.json's states are not read, LiveScene learns them between
+    its key frames (docs/workflow.md, "The DAG")."""
+    assert "--state-mode learned" in mixed_plan.scene_jobs("learned")["train"][0]
+    assert not any("--state-mode" in t for t in mixed_plan.scene_jobs("ready")["train"])
 
 
 def test_scene_without_names_skips_language(mixed_plan):
@@ -587,7 +598,7 @@ def test_sheet_cells_that_only_look_wrong_are_accepted(workflow_copy, tmp_path):
     maps.mkdir(parents=True)
     (maps / "frame_00000.png").write_bytes(b"")
     (maps.parent / "mapping.yaml").write_text("{1: door}")
-    per_object = tmp_path / "per_object" / "door"
+    per_object = tmp_path / "cut" / "per_object" / "door"  # no mapping.yaml in it or above it
     per_object.mkdir(parents=True)
     (per_object / "frame_00000.png").write_bytes(b"")
     shots, model = tmp_path / "shots", tmp_path / "run:2" / "sparse"
@@ -598,11 +609,14 @@ def test_sheet_cells_that_only_look_wrong_are_accepted(workflow_copy, tmp_path):
         {"scene": "star", "masks": maps, "names": names, "state_ranges": "*=0,90", **row},
         {"scene": "parent", "masks": maps, "names": "no", **row},
         {"scene": "objects", "masks": per_object.parent, "names": "no", **row},
+        {"scene": "unmasked", "masks": "no", "names": names, **row, "methods": "mk-planes"},  # names, key frames
         {"scene": "model", "source": "images", "path": shots, "poses": f"colmap:{model}", "masks": "no",
          "key_frames": "no", "names": "no", "methods": "mk-planes"}])
     sheet.write_text("\ufeff" + sheet.read_text(), encoding="utf-8")  # "CSV UTF-8" of a spreadsheet
     plan = workflow_copy.dry_run()
     assert "--range '*=0,90'" in plan.scene_jobs("star")["states"][0]
+    assert f"--input {maps} --mapping {names} --frames " in plan.scene_jobs("star")["labels"][0]
+    assert f"--key-frames {keys} --mapping {names} --frames " in plan.scene_jobs("unmasked")["states"][0]
     assert {"labels", "states", "assemble"} <= set(plan.scene_jobs("parent")) and plan.scene_jobs("objects")
     assert f"--model {model} " in plan.scene_jobs("model")["poses_import"][0]
 
