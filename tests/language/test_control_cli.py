@@ -106,6 +106,12 @@ def test_control_names_a_state_beyond_the_training_frames(tiny_dataset):
     beyond = control_cli._beyond_training(tiny_dataset, {"object0": 1.0, "object1": 1.0, "object2": 0.5})
     assert beyond == {"object0": {"state": 1.0, "training_range": [0.0, 0.4]}}
     assert control_cli._beyond_training(tiny_dataset, {"object0": 0.5, "object1": 0.0, "object2": 1.0}) == {}
+    # below the range too, with the same margin (0.125): a drawer the capture never closed further than 0.4
+    for k, f in enumerate(tiny_dataset.frames_in("train")):
+        f.state = {"object0": (0.4, 0.5)[k % 2], "object1": 0.0, "object2": 0.0}
+    assert control_cli._beyond_training(tiny_dataset, {"object0": 0.3, "object1": 0.0, "object2": 0.0}) == {}
+    assert control_cli._beyond_training(tiny_dataset, {"object0": 0.2, "object1": 0.0, "object2": 0.0}) == {
+        "object0": {"state": 0.2, "training_range": [0.4, 0.5]}}
 
 
 def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsys, encoder):
@@ -124,6 +130,7 @@ def test_language_query_and_relevancy(tiny_dataset, tmp_path, monkeypatch, capsy
     rel = cv2.imread(str(png), cv2.IMREAD_GRAYSCALE)
     assert info["fraction_above_0.5"] == 0.5
     assert rel[:, :8].min() > 127 > rel[:, 8:].max()
+    assert rel[:, :8].min() == 255 and rel[:, 8:].max() == 0  # "thing zero" names object0: its probability, 1 or 0
     assert language_cli.main(["relevancy", "--run", str(tmp_path / "run"), "--data", str(tiny_dataset.root),
                               "--out", str(png), "--source", "language", "thing zero"]) == 2
     assert "renders no language embedding" in capsys.readouterr().err
@@ -219,3 +226,15 @@ def test_control_starts_from_a_frames_states_without_a_run(tiny_dataset, capsys)
 def test_control_refuses_a_frame_without_a_dataset(capsys):
     assert control_cli.main(["--objects", "fridge,drawer", "--no-encoder", "--from-frame", "open all"]) == 2
     assert "a frame needs a scene dataset" in capsys.readouterr().err
+
+
+def test_no_cache_loads_the_encoder_without_a_cache_folder(monkeypatch, tmp_path):
+    from stages.language import encoder as encoder_module
+
+    seen = []
+    monkeypatch.setattr(encoder_module, "load_encoder",
+                        lambda kind, path, cache_dir, clip_model: seen.append(cache_dir))
+    parser = language_cli.build_parser()
+    language_cli.encoder_from_args(parser.parse_args(["query", "--data", "d", "--no-cache", "x"]))
+    language_cli.encoder_from_args(parser.parse_args(["query", "--data", "d", "--cache", str(tmp_path), "x"]))
+    assert seen == [None, tmp_path]
