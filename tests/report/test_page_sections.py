@@ -29,6 +29,7 @@ from stages.report.scene_page import (
     section_sliders,
     section_stability,
     section_states,
+    section_timings,
     section_unseen,
     section_verdict,
 )
@@ -184,6 +185,12 @@ def test_summary_numbers_skipped_rules_and_job_seconds(tmp_path, tiny_dataset):
     assert summary["skipped"] == ["labels"]  # not train[mk-planes]: that method is not this scene's
     # capture, poses, both trainings and livescene's evaluation; the stability suite (99 s) is shared: not summed
     assert summary["job_seconds"] == round(3.1 + 12.5 + 150.2 + 151.0 + 40.0, 1)
+    timings = section_timings(sd)
+    longest_first = ["train_conerf", "train_livescene", "stability", "evaluate_livescene", "poses", "capture"]
+    assert [r[0] for r in _rows(timings.split("</svg>")[1])] == longest_first
+    assert re.findall(r'text-anchor="end" font-size="12">([^<]+)</text>', timings) == longest_first
+    # a dataset folder without transforms.json gives no counts (the head shows dashes, not 0 frames)
+    assert collect_scene("x", ReportInputs(dataset=tmp_path), methods=[], plan={}).dataset_info is None
 
 
 def test_verdict_cells_are_coloured_by_direction_and_name_the_seed_trained(tmp_path, tiny_dataset):
@@ -253,10 +260,14 @@ def test_export_rows_keep_the_timings_in_their_columns_and_escape_states(tmp_pat
         json.dumps(
             {
                 "objects": ["<door>"],
+                "options": {"objects": True},
                 "exports": [
                     {
                         "states": {"<door>": 0.5},
-                        "files": {"scene_mesh": {"vertices": 10, "triangles": 20, "bytes": 3 * 2**20}},
+                        "files": {
+                            "scene_mesh": {"vertices": 10, "triangles": 20, "bytes": 3 * 2**20},
+                            "objects/<door>_mesh": {"vertices": 3, "triangles": 1, "bytes": 100},
+                        },
                         "timings_s": {"render": 1.0, "fuse": 2.0, "extract": 3.0, "write": 4.0, "total": 10.0},
                     }
                 ],
@@ -275,6 +286,7 @@ def test_export_rows_keep_the_timings_in_their_columns_and_escape_states(tmp_pat
         "10.000",
     )
     assert row["scene mesh"] == "10 v / 20 t" and "3.00 MiB" in html
+    assert row["&lt;door&gt; part"] == "3 v / 1 t"  # the object's own part, in its column
 
 
 def test_labels_section_numbers_each_object_and_frame(tmp_path):
