@@ -54,11 +54,7 @@ def line_plot_svg(series: list[Series], *, x_label: str, y_label: str, title: st
     y_lo, y_hi = min(ys), max(ys)
     pad = (y_hi - y_lo) * 0.08 or 1.0
     y_lo, y_hi = y_lo - pad, y_hi + pad
-    xt, yt = nice_ticks(x_lo, x_hi), nice_ticks(y_lo, y_hi)
-    if xt:
-        x_hi = max(x_hi, xt[-1])
-    if yt:
-        y_lo, y_hi = min(y_lo, yt[0]), max(y_hi, yt[-1])
+    xt, yt = nice_ticks(x_lo, x_hi), nice_ticks(y_lo, y_hi)  # ticks lie inside [lo, hi]: the axes end at the data
     left, right, top, bottom = 64, 150, 34, 48
     pw, ph = width - left - right, height - top - bottom
 
