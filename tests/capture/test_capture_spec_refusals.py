@@ -1,0 +1,97 @@
+"""Each impossible spec value is refused with the key, and the value at the edge of the range is accepted."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stages.capture import CaptureSpecError, spec_from_dict
+
+TINY = Path(__file__).resolve().parents[2] / "config" / "captures" / "tiny.yaml"
+
+
+def _tiny() -> dict:
+    return yaml.safe_load(TINY.read_text())
+
+
+def _walk(data: dict, waypoints: list) -> None:
+    data["camera"] = {"kind": "walk", "target": [0.0, 1.2, 0.6], "waypoints": waypoints}
+
+
+REFUSED = [
+    (lambda d: d["video"].update(n_frames=0), "video"),
+    (lambda d: d["video"].update(fov_deg=170), "video"),
+    (lambda d: d["video"].update(height=7), "video"),
+    (lambda d: d["video"].update(fps=0), "video"),
+    (lambda d: d["video"].update(exposure_jitter=1.5), "video.exposure_jitter"),
+    (lambda d: d["video"].update(white_balance_jitter=-0.1), "video.exposure_jitter"),
+    (lambda d: d.update(room=[4.0, 0.0, 2.5]), "room is [4.0, 0.0, 2.5], all values must be > 0"),
+    (lambda d: d.update(units={"name": "mm", "per_metre": 0}), "units.per_metre must be > 0"),
+    (lambda d: d["render"].update(lights=[]), "render.lights is empty"),
+    (lambda d: d["render"].update(supersample=0), "render.supersample"),
+    (lambda d: d["render"].update(texture_size=8), "render.supersample"),
+    (lambda d: d.update(mask_scope="parts"), "mask_scope 'parts' unknown"),
+    (lambda d: d["objects"][1].update(name="cabinet"), "object names ['cabinet'] appear more than once"),
+    (lambda d: d["objects"][1].update(name="a/b"), "objects[1] (a/b): the name holds a path separator"),
+    (lambda d: d["objects"][0].update(hinge="back"), "objects[0] (cabinet): hinge 'back' is not valid for a door"),
+    (lambda d: d["objects"][1].update(hinge="left"), "objects[1] (drawer): hinge 'left' is not valid for a drawer"),
+    (lambda d: d["objects"][1].update(thickness=0.15), "objects[1] (drawer): thickness 0.15"),  # half of 0.3
+    (lambda d: d["objects"][1].update(thickness=0.0), "objects[1] (drawer): thickness 0.0"),
+    (lambda d: d["objects"][0]["schedule"].update(interpolation="cubic"), "schedule.interpolation 'cubic'"),
+    (lambda d: d["objects"][0]["schedule"].update(keys=[[0.0, 0.0], [1.0, 1.5]]), "schedule states must lie in"),
+    (lambda d: d["objects"][0]["schedule"].update(keys=[[0.0, -0.1]]), "schedule states must lie in"),
+    (lambda d: d["objects"][0]["schedule"].update(keys=[]), "schedule.keys must be a list of [time, state]"),
+    (lambda d: d["objects"][0].update(size=[0.6, 0.5]), "objects[0] (cabinet).size is [0.6, 0.5], expected 3"),
+    (lambda d: d["objects"][0].update(limits=[0.0]), "objects[0] (cabinet).limits is [0.0], expected 2"),
+    (lambda d: d["camera"].update(kind="drone"), "camera.kind 'drone' unknown"),
+    (lambda d: d["camera"].update(radius=0.0), "camera.radius must be > 0"),
+    (lambda d: _walk(d, [[0.0, -1.0, 1.5]]), "camera.kind walk needs at least 2 waypoints"),
+    (lambda d: _walk(d, [[0.0, -1.0, 1.5], [1.0, -1.0]]), "camera.waypoints[1] is [1.0, -1.0], expected 3"),
+    (lambda d: d["key_frames"].update(every=0), "key_frames.every >= 1"),
+    (lambda d: d["key_frames"].update(noise_std=-0.01), "key_frames.every >= 1 and noise_std >= 0"),
+    (lambda d: d["render"]["lights"][0].update(position=[0.0, 0.0]), "render.lights[0].position"),
+    (lambda d: d["furniture"][0].update(size=[0.8, 0.0, 0.7]), "furniture[0].size"),
+]
+
+
+@pytest.mark.parametrize(("edit", "words"), REFUSED)
+def test_an_impossible_value_is_refused_with_its_key(edit, words):
+    data = _tiny()
+    edit(data)
+    with pytest.raises(CaptureSpecError) as info:
+        spec_from_dict(data, TINY)
+    message = str(info.value)
+    assert message.startswith(f"{TINY}: ") and "; fix: " in message
+    assert words in message, message
+
+
+ACCEPTED = [
+    lambda d: d["video"].update(n_frames=1, width=8, height=8),
+    lambda d: d["video"].update(exposure_jitter=1.0, white_balance_jitter=0.0),
+    lambda d: d["objects"][1].update(thickness=0.149),
+    lambda d: d["objects"][0]["schedule"].update(keys=[[0.0, 0.0], [0.5, 0.0], [0.5, 1.0]], interpolation="step"),
+    lambda d: _walk(d, [[0.0, -1.0, 1.5], [1.0, -1.0, 1.5]]),
+    lambda d: d["key_frames"].update(every=1, noise_std=0.0),
+    lambda d: d.update(mask_scope="moving"),
+]
+
+
+@pytest.mark.parametrize("edit", ACCEPTED)
+def test_a_value_at_the_edge_of_its_range_is_accepted(edit):
+    data = _tiny()
+    edit(data)
+    spec_from_dict(data, TINY)
+
+
+def test_254_objects_fit_the_uint8_masks_and_255_do_not():
+    data = {"name": "many", "room": [30.0, 30.0, 2.5]}
+    box = {"kind": "drawer", "size": [0.5, 0.5, 0.5]}
+    data["objects"] = [
+        {**box, "name": f"box {k}", "position": [-14.0 + k % 25, -14.0 + k // 25, 0.0]} for k in range(254)
+    ]
+    assert len(spec_from_dict(data).objects) == 254
+    data["objects"].append({**box, "name": "one more", "position": [10.0, 12.0, 0.0]})
+    with pytest.raises(CaptureSpecError, match="more than 254 objects"):
+        spec_from_dict(data)
