@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 import zlib
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from stages.scene import look_at
 
-from .spec import CameraPathSpec, CaptureSpec
+from .spec import CameraPathSpec, CaptureSpec, CaptureSpecError
+
+MIN_DISTANCE_M = 0.05
+"""A camera this near its target (metres) looks in whatever direction its hand shake gives it."""
+MIN_TILT_FROM_VERTICAL_DEG = 1.0
+"""A camera looking (almost) straight up or down has no defined roll: ``look_at``'s right vector vanishes."""
 
 
 def seeded_rng(seed: int, label: str) -> np.random.Generator:
@@ -46,8 +52,27 @@ def _walk_centres(path: CameraPathSpec, times_s: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(s, arc, pts[:, k]) for k in range(3)], axis=1)
 
 
-def camera_path(spec: CaptureSpec) -> np.ndarray:
-    """``[n_frames, 4, 4]`` camera-to-world poses (OpenGL axes) in metres."""
+def check_view_directions(centres: np.ndarray, target: np.ndarray, spec_path: str | Path) -> None:
+    """Refuse a path whose camera sits on its target or right above or below it (NaN or spinning poses)."""
+    back = centres - target
+    dist = np.linalg.norm(back, axis=1)
+    tilt = np.degrees(np.arcsin(np.clip(np.linalg.norm(back[:, :2], axis=1) / np.maximum(dist, 1e-12), 0.0, 1.0)))
+    bad = np.flatnonzero((dist < MIN_DISTANCE_M) | (tilt < MIN_TILT_FROM_VERTICAL_DEG))
+    if bad.size:
+        i = int(bad[0])
+        on_target = dist[i] < MIN_DISTANCE_M
+        where = "on camera.target" if on_target else "straight above or below camera.target"
+        fix = (f"keep the path at least {MIN_DISTANCE_M:g} m from camera.target" if on_target else
+               f"move camera.target or the path so that the camera sees the target at least "
+               f"{MIN_TILT_FROM_VERTICAL_DEG:g} degree off vertical")
+        raise CaptureSpecError(
+            spec_path, f"the camera of frame {i} (of {bad.size} such frames) at {np.round(centres[i], 3).tolist()} m "
+            f"is {where} {[float(x) for x in target]}, where its view direction or roll is undefined",
+            f"{fix} (camera.waypoints, or camera.radius and camera.height)")
+
+
+def _camera_centres(spec: CaptureSpec) -> np.ndarray:
+    """``[n_frames, 3]`` camera centres in metres before hand shake (the path's smoothed positions)."""
     path = spec.camera
     n = spec.video.n_frames
     times_s = np.arange(n) / spec.video.fps
@@ -58,11 +83,20 @@ def camera_path(spec: CaptureSpec) -> np.ndarray:
         padded = np.concatenate([np.repeat(centres[:1], k, 0), centres, np.repeat(centres[-1:], k, 0)])
         kernel = np.ones(2 * k + 1) / (2 * k + 1)
         centres = np.stack([np.convolve(padded[:, a], kernel, mode="valid") for a in range(3)], axis=1)
+    return centres
+
+
+def camera_path(spec: CaptureSpec, spec_path: str | Path = "<spec>") -> np.ndarray:
+    """``[n_frames, 4, 4]`` camera-to-world poses (OpenGL axes) in metres."""
+    path = spec.camera
+    n = spec.video.n_frames
+    times_s = np.arange(n) / spec.video.fps
     rng = seeded_rng(spec.seed, "camera-shake")
     j = path.jitter
-    centres = centres + shake(times_s, j.position, j.frequency_hz, rng)
+    centres = _camera_centres(spec) + shake(times_s, j.position, j.frequency_hz, rng)
     angles = shake(times_s, np.deg2rad(j.rotation_deg), j.frequency_hz, rng)
     target = np.asarray(path.target, dtype=np.float64)
+    check_view_directions(centres, target, spec_path)
     poses = np.empty((n, 4, 4))
     for i in range(n):
         pose = look_at(centres[i], target)

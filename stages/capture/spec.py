@@ -369,3 +369,6 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
         raise CaptureSpecError(path, "camera.radius must be > 0", "give the orbit radius in metres")
     if spec.key_frames.every < 1 or spec.key_frames.noise_std < 0:
         raise CaptureSpecError(path, "key_frames.every >= 1 and noise_std >= 0 needed", "fix key_frames")
+    from .camera_path import camera_path  # imports this module
+
+    camera_path(spec, path)  # refuses a camera on its target or looking straight down before any frame is rendered

@@ -95,3 +95,41 @@ def test_254_objects_fit_the_uint8_masks_and_255_do_not():
     data["objects"].append({**box, "name": "one more", "position": [10.0, 12.0, 0.0]})
     with pytest.raises(CaptureSpecError, match="more than 254 objects"):
         spec_from_dict(data)
+
+
+@pytest.mark.parametrize(
+    ("camera", "problem"),
+    [
+        # a walk that starts on the point it looks at
+        (
+            {"kind": "walk", "target": [0.0, 1.2, 0.6], "waypoints": [[0.0, 1.2, 0.6], [0.5, 1.2, 0.6]]},
+            "on camera.target",
+        ),
+        # a walk right above the target: look_at's right vector vanishes (NaN poses before this check)
+        (
+            {"kind": "walk", "target": [0.0, 1.2, 0.6], "waypoints": [[0.0, 1.2, 2.0], [0.0, 1.21, 2.0]]},
+            "straight above",
+        ),
+        # an orbit of 1 cm radius 1.4 m above its target: 0.4 degree off vertical
+        ({"kind": "orbit", "target": [0.0, 1.2, 0.6], "radius": 0.01, "height": 2.0}, "straight above"),
+    ],
+)
+def test_a_camera_without_a_view_direction_is_refused_before_rendering(camera, problem):
+    data = _tiny()
+    data["camera"] = camera
+    with pytest.raises(CaptureSpecError, match=problem) as err:
+        spec_from_dict(data, "room.yaml")
+    assert "room.yaml" in str(err.value) and "frame 0" in str(err.value)
+
+
+def test_a_steep_camera_two_degrees_off_vertical_is_accepted():
+    data = _tiny()
+    # 5 cm off the target's vertical at 1.4 m above it: atan(0.05 / 1.4) = 2.0 degrees, shake off
+    data["camera"] = {
+        "kind": "orbit",
+        "target": [0.0, 1.2, 0.6],
+        "radius": 0.05,
+        "height": 2.0,
+        "jitter": {"position": 0.0, "rotation_deg": 0.0},
+    }
+    spec_from_dict(data, "room.yaml")
