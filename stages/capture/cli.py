@@ -173,7 +173,8 @@ def _run_render(argv: list[str]) -> int:
     preview = np.zeros(depth.shape, dtype=np.uint8)
     if hit.any():
         lo, hi = float(depth[hit].min()), float(depth[hit].max())
-        preview[hit] = np.round(255 * (1 - (depth[hit] - lo) / max(hi - lo, 1e-12))).astype(np.uint8)
+        # near 255, far 1: 0 stays "nothing hit"
+        preview[hit] = 1 + np.round(254 * (1 - (depth[hit] - lo) / max(hi - lo, 1e-12))).astype(np.uint8)
     for path, img in ((png, rgb), (Path(f"{stem}.depth.png"), preview), (Path(f"{stem}.ids.png"),
                                                                          out["ids"].astype(np.uint8))):
         with atomic_path(path, suffix=".png") as tmp:
