@@ -12,7 +12,9 @@ from stages.export.tsdf_fusion import (
     canonical_order,
     depth_edges,
     fusable_depth,
+    intrinsic_matrix,
     ray_distance_to_z,
+    world_to_opencv_camera,
 )
 from stages.scene import Camera, generate_rays, look_at
 from stages.scene.camera import pixel_directions
@@ -86,6 +88,8 @@ def test_object_pixels_threshold_and_erosion():
     assert mask.sum() == 9 and mask[3:6, 3:6].all()  # the 5x5 square eroded to its 3x3 core
     assert object_pixels(probs, 0, 0.95, erode_px=0).sum() == 0
     assert object_pixels(probs, 1, 0.5).sum() == 0
+    # the threshold itself belongs to the object (docs/export.md: probability >= --prob-threshold)
+    assert object_pixels(probs, 0, 0.9, erode_px=0).sum() == 25
 
 
 def _face_set(positions: np.ndarray, faces: np.ndarray) -> set:
@@ -120,3 +124,55 @@ def test_canonical_order_gives_the_same_arrays_for_any_vertex_and_face_order():
     # the same surface: every face with its corners and winding
     assert _face_set(np.asarray(a.vertices), np.asarray(a.triangles)) == _face_set(positions, faces)
     assert np.all(np.diff(np.asarray(a.vertices)[:, 0]) >= 0)
+
+
+def test_open3d_intrinsics_put_a_pixels_centre_on_its_integer_index():
+    """open3d's pixel centres are at integers, this project's at +0.5: the ray through pixel (u, v) projects to
+    (u, v) exactly, else the mesh sits half a pixel off the renders (and off the point cloud)."""
+    k = intrinsic_matrix(CAMERA)
+    for u, v in ((0, 0), (47, 35), (10, 30)):
+        x = (u + 0.5 - CAMERA.cx) / CAMERA.fx  # the ray's direction in OpenCV camera axes, z = 1
+        y = (v + 0.5 - CAMERA.cy) / CAMERA.fy
+        assert np.allclose(k @ np.array([x, y, 1.0]), [u, v, 1.0], atol=1e-12)
+    # the extrinsic maps world to OpenCV camera axes: a camera 2 above the origin, looking down, sees it 2 ahead
+    c2w = look_at(np.array([0.0, 0.0, 2.0]), np.zeros(3), up=(0.0, 1.0, 0.0))
+    assert np.allclose(world_to_opencv_camera(c2w) @ [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 2.0, 1.0], atol=1e-12)
+
+
+def test_one_view_makes_no_surface_two_views_do():
+    """A voxel is meshed where two views at least saw it (weight >= 1.5, docs/export.md): one stray view is no
+    surface. The fused pixels are counted and the points stay in the box."""
+    box = np.array([[-1.0, -1.0, -0.5], [1.0, 1.0, 1.0]])
+    settings = FusionSettings(voxel=0.02)
+    fusion = TSDFFusion(box, settings)
+    c2w, dist, rgb = _plane_view(np.array([0.0, 0.0, 2.0]))
+    z = fusable_depth(CAMERA, dist, np.ones(dist.shape), settings)
+    z[:, :10] = 0.0  # 10 columns not fused
+    fusion.integrate(CAMERA, c2w, rgb, z)
+    assert fusion.pixels_fused == 36 * 38
+    assert len(fusion.extract_mesh().vertices) == 0
+    fusion.integrate(CAMERA, c2w, rgb, z)
+    assert fusion.pixels_fused == 2 * 36 * 38
+    mesh = fusion.extract_mesh()
+    assert len(mesh.vertices) > 100
+    # normals are written with the mesh (ply, glb): on the plane z = 0 they are vertical
+    assert mesh.has_vertex_normals() and np.abs(np.asarray(mesh.vertex_normals)[:, 2]).min() > 0.9
+    # the view covers 2.4 x 1.8 at that distance, wider than the box: the points are cropped to it
+    p = np.asarray(fusion.extract_points().points)
+    assert len(p) > 100 and np.all(p >= box[0]) and np.all(p <= box[1])
+    assert np.abs(p[:, 0]).max() > 0.95
+
+
+def test_an_edge_across_the_rows_and_an_accumulation_of_one_half():
+    """The depth filter looks at all four neighbours (an edge between rows too); accumulation >= 0.5 is fused."""
+    z = np.full((10, 10), 2.0)
+    z[5:, :] = 4.0
+    edges = depth_edges(z, 0.05)
+    assert edges[4:6, :].all() and not edges[:4].any() and not edges[6:].any()
+    cam = Camera(fx=10.0, fy=10.0, cx=5.0, cy=5.0, width=10, height=10)
+    v, u = np.meshgrid(np.arange(10), np.arange(10), indexing="ij")
+    distance = 2.0 * np.linalg.norm(pixel_directions(cam, u, v), axis=-1)
+    acc = np.full((10, 10), 0.5)
+    acc[0, 0] = 0.49
+    out = fusable_depth(cam, distance, acc, FusionSettings(voxel=0.1))
+    assert out[0, 0] == 0 and np.allclose(out.reshape(-1)[1:], 2.0)
