@@ -322,3 +322,88 @@ def _glb_color_accessor(path: Path) -> list[float]:
     acc = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"]]
     view = doc["bufferViews"][acc["bufferView"]]
     return np.frombuffer(body, "<f4", 3, view["byteOffset"]).tolist()
+
+
+def test_glb_files_stand_up_and_export_json_records_units_and_voxel(drawer_export):
+    """The tiny capture is z-up in metres; its scene box is 4 m long at most, fused at 128 voxels: 3.125 cm."""
+    from stages.export.mesh_io import UP_TO_GLTF_Y
+
+    _, _, out, doc = drawer_export
+    assert doc["world_up"] == "+z" and doc["units"] == "m"
+    assert doc["voxel"] == pytest.approx(4.0 / 128)
+    for record in doc["exports"]:
+        for entry in record["files"].values():
+            assert _glb_json(out / entry["path"])["nodes"][0]["rotation"] == pytest.approx(UP_TO_GLTF_Y["+z"])
+
+
+def test_the_probability_threshold_decides_which_pixels_are_an_objects(tiny_capture_dataset, tmp_path):
+    """Rendered probabilities of 0.6: an object's part at --prob-threshold 0.5, nothing at 0.7."""
+    _, ds, renderer = tiny_capture_dataset
+
+    class Unsure(TruthRun):
+        def render(self, *args, **kwargs):
+            out = super().render(*args, **kwargs)
+            if "probs" in out:
+                out["probs"] = out["probs"] * 0.6
+            return out
+
+    fused = {}
+    for threshold in (0.5, 0.7):
+        options = ExportOptions(objects=True, views=2, scale=0.5, resolution=32, prob_threshold=threshold)
+        doc = export_run(Unsure(renderer), ds, [{}], tmp_path / str(threshold), options, progress=False)
+        fused[threshold] = doc["exports"][0]["pixels_fused"]
+    assert fused[0.5]["cabinet"] > 0 and fused[0.5]["drawer"] > 0
+    assert fused[0.7]["cabinet"] == 0 and fused[0.7]["drawer"] == 0
+    assert fused[0.7]["scene"] == fused[0.5]["scene"] > 0
+
+
+def test_the_same_combination_twice_is_refused_before_rendering(tiny_capture_dataset, tmp_path):
+    _, ds, renderer = tiny_capture_dataset
+    run = TruthRun(renderer)
+    with pytest.raises(InputError, match="the same state combination is given twice"):
+        export_run(run, ds, [{"drawer": 1.0}, {"drawer": 1.0, "cabinet": 0.0}], tmp_path / "x", ExportOptions(),
+                   progress=False)
+    assert run.calls == [] and not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(("field", "bad", "good"), [
+    ("prob_threshold", [0.0, 1.0, -0.1], [0.01, 0.99]),
+    ("resolution", [15, 2049], [16, 2048]),
+    ("scale", [0.0, 4.01], [0.05, 4.0]),
+    ("views", [1, -1], [0, 2]),
+    ("fmt", ["stl"], ["ply", "obj", "glb"]),
+])
+def test_options_out_of_range_are_refused_with_the_flag(field, bad, good):
+    flag = "--format" if field == "fmt" else "--" + field.replace("_", "-")
+    for value in bad:
+        with pytest.raises(InputError, match=f"^{flag}: "):
+            ExportOptions(**{field: value}).check()
+    for value in good:
+        ExportOptions(**{field: value}).check()
+
+
+def test_views_are_spread_over_the_training_frames_and_rendered_without_distortion(tiny_capture_dataset):
+    from stages.export.exporter import render_camera, training_views
+    from stages.scene import Camera
+
+    ds = tiny_capture_dataset[1]
+    train = [i for i, f in enumerate(ds.frames) if f.split == "train"]
+    assert train == [1, 3, 5, 7, 9, 11]  # the "alternate" split of 12 frames
+    picked = [i for i, _, _ in training_views(ds, 3)]
+    assert picked[0] == 1 and picked[-1] == 11 and len(set(picked)) == 3  # both ends of the training frames
+    assert [i for i, _, _ in training_views(ds, 0)] == train
+    lens = Camera(fx=100.0, fy=90.0, cx=64.0, cy=48.0, width=128, height=96, distortion={"k1": 0.1, "p1": 0.01})
+    half = render_camera(lens, 0.5)
+    assert half == Camera(fx=50.0, fy=45.0, cx=32.0, cy=24.0, width=64, height=48) and not half.has_distortion
+    assert not render_camera(lens, 1.0).has_distortion
+
+
+def test_folder_and_file_names_stay_inside_the_export():
+    from stages.export.exporter import file_stem
+    from stages.export.state_spec import full_state, state_slug
+
+    assert state_slug({"top/drawer": 1.0, "a b": 0.5}) == "top-drawer-1_a-b-0.5"
+    assert state_slug({}) == "no-objects"  # a room without objects still gets a folder
+    assert file_stem("top/drawer") == "top-drawer" and file_stem("a\\b") == "a-b"
+    assert file_stem("..") == "_" and file_stem(".") == "_"
+    assert full_state({"drawer": 1.0}, ["cabinet", "drawer"]) == {"cabinet": 0.0, "drawer": 1.0}

@@ -61,3 +61,10 @@ def test_world_up_is_the_axis_nearest_the_cameras_up():
     assert world_up_axis([_camera(np.array([0.0, -1.0, 0.0]), 30)]) == "-y"
     assert world_up_axis([_camera(np.array([1.0, 0.2, 0.1]), 5)]) == "+x"
     assert world_up_axis([]) == "+y"
+
+
+def test_cameras_whose_up_vectors_cancel_fall_back_to_gltf_up():
+    upright = _camera(np.array([0.0, 0.0, 1.0]), 0)
+    upside_down = upright.copy()
+    upside_down[:3, :2] *= -1  # rolled by 180 degrees: its up is -z
+    assert world_up_axis([upright, upside_down]) == "+y"  # no direction to choose: glTF's own, no rotation
