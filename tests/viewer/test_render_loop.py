@@ -145,3 +145,33 @@ def test_close_stops_the_thread(loops):
     loop = _loop(loops, ChunkedRender(), Delivered())
     loop.close()
     assert loop.closed and not loop._thread.is_alive()
+
+
+def test_the_loop_keeps_only_the_newest_frames(loops):
+    delivered = Delivered()
+    loop = _loop(loops, ChunkedRender(chunks=1, step_s=0.0), delivered)
+    for i in range(RenderLoop.RECENT + 6):
+        loop.submit(_request(i / 100))
+        assert loop.wait_idle(10)
+    assert len(delivered.frames) > RenderLoop.RECENT
+    assert len(loop.stats.recent) == RenderLoop.RECENT  # a long session does not keep every image it sent
+    assert loop.stats.recent == delivered.frames[-RenderLoop.RECENT:]
+
+
+def test_a_frame_that_cannot_be_delivered_does_not_stop_the_loop(loops):
+    """The client may disconnect while its image renders: reported, and the next request is still served."""
+    frames = []
+
+    def deliver(frame) -> None:
+        if not frames:
+            frames.append(None)
+            raise ConnectionError("client went away")
+        frames.append(frame)
+
+    loop = _loop(loops, ChunkedRender(chunks=1, step_s=0.0), deliver)
+    loop.submit(_request(0.0))
+    assert loop.wait_idle(10)
+    assert loop.stats.errors == 1 and loop.stats.last_error == "deliver: ConnectionError: client went away"
+    second = loop.submit(_request(1.0))
+    assert loop.wait_idle(10)
+    assert frames[-1] is not None and frames[-1].request.serial == second.serial

@@ -41,3 +41,13 @@ def test_previews_are_at_most_a_quarter_and_fit_the_budget():
     assert preview_pixels(full, 1e9, 0.15) == full // 4  # fast: a quarter (the full image fits anyway)
     assert preview_pixels(full, 10_000, 0.15) == 1500  # 10k rays/s -> 1500 rays in 0.15 s
     assert preview_pixels(full, 10, 0.15) == MIN_SIDE * MIN_SIDE  # never below 8x8
+
+
+def test_each_side_is_checked_and_the_doc_examples_hold():
+    for text in ("4x96", "96x4", "7x7"):
+        with pytest.raises(InputError, match="smaller than 8x8"):
+            Resolution.parse(text)
+    assert Resolution.parse("8x8") == Resolution(8, 8)
+    # docs/viewer.md: a 16:9 window gets 148x83 for the 128x96 budget; a portrait 9:16 one 83x148
+    assert fit_to_aspect(128 * 96, 16 / 9) == Resolution(148, 83)
+    assert fit_to_aspect(128 * 96, 9 / 16) == Resolution(83, 148)  # 83 / (9 / 16) = 147.6: rounded, not cut

@@ -105,3 +105,8 @@ def test_the_orbit_point_lies_on_the_viewing_axis():
     assert np.allclose(look_at_point(c2w, np.array([0.5, 0.0, 0.2])), [0.0, 0.0, 0.0], atol=1e-9)
     behind = look_at_point(c2w, np.array([0.0, -5.0, 0.0]))
     assert np.linalg.norm(behind - c2w[:3, 3]) == pytest.approx(1e-3)
+
+
+def test_frustums_of_a_dense_cluster_keep_one_percent_of_the_spread():
+    cluster = [np.array([0.001 * i, 0.0, 0.0]) for i in range(50)]  # a camera held still, then one far away
+    assert frustum_scale(np.stack([*cluster, np.array([10.0, 0.0, 0.0])])) == pytest.approx(0.1)  # 1 % of 10
