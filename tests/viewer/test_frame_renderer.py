@@ -97,3 +97,9 @@ def test_relevancy_colours_run_from_blue_to_red():
     colours = relevancy_colours(np.array([[0.0, 1.0]]))
     low, high = colours[0, 0].astype(int), colours[0, 1].astype(int)
     assert low[2] > low[0] and high[0] > high[2]
+
+
+def test_colours_are_rounded_to_the_nearest_level():
+    """As `livescene render` writes rgb.png: a still view is the run's render pixel for pixel."""
+    levels = to_uint8(np.array([0.5, 0.999, 0.2, 1.5, -0.2, 1.0, 0.0], dtype=np.float32))
+    assert levels.tolist() == [128, 255, 51, 255, 0, 255, 0]  # 127.5 -> 128, 254.7 -> 255

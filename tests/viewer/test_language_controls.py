@@ -68,3 +68,20 @@ def test_relevancy_sources_follow_what_the_run_renders(bag_encoder):
 def test_without_an_encoder_a_relevancy_query_says_how_to_get_one():
     with pytest.raises(InputError, match="--no-encoder"):
         LanguageControls(_vocabulary(), None).grounder()
+
+
+def test_each_language_source_reaches_its_own_map(bag_encoder):
+    """``language_objects`` decodes the embedding into object probabilities first; ``language`` is LERF's map."""
+    import numpy as np
+
+    controls = LanguageControls(_vocabulary(), lambda: bag_encoder, renders_language=True,
+                                run_encoder=bag_encoder.name)
+    fridge, drawer = bag_encoder.encode([PROMPTS["fridge"]["description"], PROMPTS["drawer"]["description"]])
+    embedding = np.stack([np.tile(fridge, (2, 1)), np.tile(drawer, (2, 1))])  # [2, 2, D]: fridge row, drawer row
+    grounder = controls.grounder()
+    objects = controls.relevancy("refrigerator", "language_objects", {"language": embedding})
+    lerf = controls.relevancy("refrigerator", "language", {"language": embedding})
+    assert np.array_equal(objects, grounder.relevancy_from_language_objects(embedding, "refrigerator"))
+    assert np.array_equal(lerf, grounder.relevancy_from_language(embedding, "refrigerator"))
+    assert not np.allclose(objects, lerf)
+    assert objects[0].min() > objects[1].max()  # the fridge's pixels are the refrigerator's
