@@ -407,3 +407,17 @@ def test_folder_and_file_names_stay_inside_the_export():
     assert file_stem("top/drawer") == "top-drawer" and file_stem("a\\b") == "a-b"
     assert file_stem("..") == "_" and file_stem(".") == "_"
     assert full_state({"drawer": 1.0}, ["cabinet", "drawer"]) == {"cabinet": 0.0, "drawer": 1.0}
+
+
+def test_without_a_scene_box_the_export_is_cropped_to_the_runs_normalisation_cube(tmp_path):
+    from types import SimpleNamespace
+
+    from stages.export.exporter import export_box
+
+    dataset = SimpleNamespace(scene_box=None, root=tmp_path)
+    # x_unit = 0.5 x - (1, 0.5, 0.5): the cube [-1, 1]^3 is the world's (2, 1, 1) +- 2
+    transform = np.array([[0.5, 0, 0, -1.0], [0, 0.5, 0, -0.5], [0, 0, 0.5, -0.5], [0, 0, 0, 1.0]])
+    box = export_box(dataset, SimpleNamespace(norm=SimpleNamespace(transform=transform)))
+    assert np.allclose(box, [[0.0, -1.0, -1.0], [4.0, 3.0, 3.0]])
+    with pytest.raises(InputError, match=r"scene.json: no scene_box, and the run has no scene normalisation"):
+        export_box(dataset, SimpleNamespace())
