@@ -421,3 +421,22 @@ def test_without_a_scene_box_the_export_is_cropped_to_the_runs_normalisation_cub
     assert np.allclose(box, [[0.0, -1.0, -1.0], [4.0, 3.0, 3.0]])
     with pytest.raises(InputError, match=r"scene.json: no scene_box, and the run has no scene normalisation"):
         export_box(dataset, SimpleNamespace())
+
+
+def test_the_volume_is_fused_at_the_voxel_export_json_records(tiny_capture_dataset, tmp_path, monkeypatch):
+    """Voxel = the scene box's longest side / --resolution: 4 m / 16 = 25 cm for the tiny capture."""
+    import stages.export.exporter as exporter
+
+    _, ds, renderer = tiny_capture_dataset
+    used = []
+
+    class Recording(exporter.TSDFFusion):
+        def __init__(self, box, settings, *args, **kwargs) -> None:
+            used.append(settings)
+            super().__init__(box, settings, *args, **kwargs)
+
+    monkeypatch.setattr(exporter, "TSDFFusion", Recording)
+    doc = export_run(TruthRun(renderer), ds, [{}], tmp_path / "x",
+                     ExportOptions(views=2, scale=0.25, resolution=16), progress=False)
+    assert doc["voxel"] == pytest.approx(0.25)
+    assert [s.voxel for s in used] == pytest.approx([0.25])

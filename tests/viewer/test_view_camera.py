@@ -110,3 +110,16 @@ def test_the_orbit_point_lies_on_the_viewing_axis():
 def test_frustums_of_a_dense_cluster_keep_one_percent_of_the_spread():
     cluster = [np.array([0.001 * i, 0.0, 0.0]) for i in range(50)]  # a camera held still, then one far away
     assert frustum_scale(np.stack([*cluster, np.array([10.0, 0.0, 0.0])])) == pytest.approx(0.1)  # 1 % of 10
+
+
+def test_a_camera_rolled_upside_down_converts_without_losing_precision():
+    """Half a turn about z and 1e-7 rad about y: x's diagonal term beats y's, z's is the largest. Branching on the
+    largest term keeps the square root away from 0 (x's branch would take sqrt(~1e-14): errors of 1e-9)."""
+    t = 1e-7
+    tilt = np.array([[math.cos(t), 0.0, math.sin(t)], [0.0, 1.0, 0.0], [-math.sin(t), 0.0, math.cos(t)]])
+    rot = np.diag([-1.0, -1.0, 1.0]) @ tilt
+    assert np.allclose(wxyz_to_rotation(rotation_to_wxyz(rot)), rot, rtol=0.0, atol=1e-12)
+
+
+def test_same_view_tells_another_aspect_apart():
+    assert not ViewPose(np.eye(4), 1.0, 1.5).same_view(ViewPose(np.eye(4), 1.0, 16 / 9))
