@@ -175,3 +175,59 @@ def test_a_frame_that_cannot_be_delivered_does_not_stop_the_loop(loops):
     second = loop.submit(_request(1.0))
     assert loop.wait_idle(10)
     assert frames[-1] is not None and frames[-1].request.serial == second.serial
+
+
+def test_a_change_during_a_full_render_is_a_preview_even_after_the_settle_time(loops):
+    gate = threading.Event()
+    render, delivered = ChunkedRender(gate=gate), Delivered()
+    loop = _loop(loops, render, delivered, settle_s=0.05, frame_budget_s=1e-9)  # the full image never fits
+    loop.submit(_request(0.0))
+    assert render.entered.wait(10)
+    time.sleep(0.15)  # three settle times after the first request, but the full render still runs
+    second = loop.submit(_request(1.0))
+    gate.set()
+    assert loop.wait_idle(10)
+    assert [(f.request.serial, f.final) for f in delivered.frames] == [(second.serial, False), (second.serial, True)]
+
+
+def test_after_a_preview_the_full_image_waits_for_the_settle_time(loops):
+    delivered = Delivered()
+    loop = _loop(loops, ChunkedRender(chunks=1, step_s=0.0), delivered, settle_s=0.5, frame_budget_s=1e-9)
+    loop.submit(_request(0.0))
+    assert loop.wait_idle(10)
+    loop.submit(_request(0.5))  # within the settle time: a preview first
+    assert loop.wait_idle(10)
+    preview, final = delivered.frames[1:]
+    assert not preview.final and final.final
+    assert final.latency_s >= 0.5  # not rendered before the view was still for settle_s
+
+
+def test_a_newer_request_does_not_cut_a_preview_short(loops):
+    gate, entered, asked = threading.Event(), threading.Event(), []
+
+    def render(request, size, should_stop):
+        if size.pixels < FULL:  # the preview: hold it until a newer request waits
+            entered.set()
+            assert gate.wait(10)
+            asked.append(should_stop())
+        return np.zeros((size.height, size.width, 3), np.uint8)
+
+    delivered = Delivered()
+    loop = _loop(loops, render, delivered, settle_s=0.5, frame_budget_s=1e-9)
+    loop.submit(_request(0.0))
+    assert loop.wait_idle(10)
+    second = loop.submit(_request(0.5))
+    assert entered.wait(10)
+    loop.submit(_request(1.0))
+    gate.set()
+    assert loop.wait_idle(10)
+    assert asked[0] is False  # while dragging the preview is the only feedback: it always finishes
+    assert (second.serial, False) in [(f.request.serial, f.final) for f in delivered.frames]
+
+
+def test_the_full_image_skips_the_preview_only_when_it_fits_the_frame_budget(loops):
+    loop = _loop(loops, ChunkedRender(), Delivered(), frame_budget_s=0.15)
+    loop.stats.rays_per_second = FULL / 0.3  # a full image takes 0.3 s: twice the budget
+    assert not loop._full_fits_budget()
+    loop.stats.rays_per_second = FULL / 0.1
+    assert loop._full_fits_budget()
