@@ -440,3 +440,18 @@ def test_the_volume_is_fused_at_the_voxel_export_json_records(tiny_capture_datas
                      ExportOptions(views=2, scale=0.25, resolution=16), progress=False)
     assert doc["voxel"] == pytest.approx(0.25)
     assert [s.voxel for s in used] == pytest.approx([0.25])
+
+
+def test_objects_need_one_probability_per_object_and_the_background(tiny_capture_dataset, tmp_path):
+    """A run whose probs lack the background channel is not LiveScene's probability field: refused up front."""
+    _, ds, renderer = tiny_capture_dataset
+
+    class NoBackground(TruthRun):
+        def render(self, *args, **kwargs):
+            out = super().render(*args, **kwargs)
+            if "probs" in out:
+                out["probs"] = out["probs"][..., :-1]
+            return out
+
+    with pytest.raises(InputError, match=r"--objects needs per-object probabilities"):
+        export_run(NoBackground(renderer), ds, [{}], tmp_path / "x", ExportOptions(objects=True), progress=False)
