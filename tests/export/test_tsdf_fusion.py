@@ -124,6 +124,8 @@ def test_canonical_order_gives_the_same_arrays_for_any_vertex_and_face_order():
     # the same surface: every face with its corners and winding
     assert _face_set(np.asarray(a.vertices), np.asarray(a.triangles)) == _face_set(positions, faces)
     assert np.all(np.diff(np.asarray(a.vertices)[:, 0]) >= 0)
+    ordered = np.asarray(a.triangles)
+    assert np.array_equal(ordered[:, 0], ordered.min(axis=1))  # each face starts at its smallest vertex
 
 
 def test_open3d_intrinsics_put_a_pixels_centre_on_its_integer_index():
