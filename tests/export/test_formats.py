@@ -70,3 +70,16 @@ def test_glb_accessors_declare_bounds_and_chunks_are_aligned(tmp_path):
     assert idx["count"] == 36 and idx["min"] == [0] and idx["max"] == [7]
     assert "NORMAL" in prim["attributes"]
     assert len(read_glb(tmp_path / "box.glb")["triangles"]) == 12
+
+
+def test_the_json_chunk_is_padded_to_four_bytes_whatever_its_length(tmp_path):
+    lengths = set()
+    for n in range(1, 5):  # clouds of 1..4 points: JSON chunks of different lengths
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.arange(3 * n, dtype=float).reshape(n, 3)))
+        write_geometry(tmp_path / f"{n}.glb", cloud)
+        data = (tmp_path / f"{n}.glb").read_bytes()
+        length = struct.unpack_from("<I", data, 12)[0]
+        assert length % 4 == 0 and len(data) % 4 == 0
+        assert data[20 : 20 + length].decode().rstrip(" ").endswith("}")  # padded with spaces, as glTF requires
+        lengths.add(len(data[20 : 20 + length].decode().rstrip(" ")))
+    assert len({n % 4 for n in lengths}) > 1  # some of them needed padding

@@ -28,6 +28,7 @@ def test_without_viser_the_error_gives_the_pip_command(monkeypatch, capsys, view
 @pytest.mark.parametrize(("args", "message"), [
     (["--resolution", "big"], r"--resolution: 'big' is not WIDTHxHEIGHT; fix: write e.g. --resolution 128x96"),
     (["--frame-budget", "0"], r"--frame-budget: 0.0 seconds; fix: give a positive number"),
+    (["--settle", "-1"], r"--settle: -1.0 seconds; fix: give a positive number"),
     (["--threads", "0"], r"--threads: 0 threads; fix: give 1 or more"),
     # viser takes any socket error for a busy port and tries the next one without end: these hung without a word
     (["--port", "70000"], r"--port: 70000 is not a port; fix: give a port from 1 to 65535"),
