@@ -36,8 +36,14 @@ def test_without_viser_the_error_gives_the_pip_command(monkeypatch, capsys, view
     (["--host", "256.1.1.1"], r"--host: '256.1.1.1' is not an address of this machine"),
     (["--host", "192.0.2.1"], r"--host: cannot serve on '192.0.2.1' .*fix: give 127.0.0.1"),  # TEST-NET: not ours
 ])
-def test_bad_options_are_refused(args, message, capsys, viewer_scene):
+def test_bad_options_are_refused(args, message, capsys, viewer_scene, monkeypatch):
     pytest.importorskip("viser")
+    import stages.viewer.server as server
+
+    def built_anyway(*_a, **_k):  # a refusal lost would otherwise serve (or retry ports) without end
+        raise AssertionError(f"the viewer was started with {args}")
+
+    monkeypatch.setattr(server, "LiveViewer", built_anyway)
     assert main(["--run", str(viewer_scene.run_dir), "--data", str(viewer_scene.data), *args]) == 2
     assert re.search(message, capsys.readouterr().err)
 
