@@ -183,7 +183,8 @@ def read_states_csv(path: str | Path) -> pd.DataFrame:
         path = path / "states.csv"
     if not path.is_file():
         raise StateError(path, "states.csv not found", "run `livescene states` first")
-    table = pd.read_csv(path)
+    # object names as written: pandas would read "null", "NA" or "None" as a missing value and "2" as a number
+    table = pd.read_csv(path, dtype={"frame": str, "object": str}, keep_default_na=False)
     missing = [c for c in ("frame", "object", "value") if c not in table.columns]
     if missing:
         raise StateError(path, f"columns {missing} missing", "regenerate it with `livescene states`")
