@@ -17,8 +17,24 @@ from stages.scene import InputError, atomic_dir, read_scene, write_json
 
 
 def slug(name: str) -> str:
-    """A file-name-safe form of an object name."""
-    return re.sub(r"[^A-Za-z0-9_-]+", "-", name).strip("-") or "object"
+    """A file-name-safe form of an object name: letters and digits of any script kept ("冰箱", "шкаф"), the rest
+    '-', at most 80 characters (a file name holds 255 bytes)."""
+    return re.sub(r"[^\w-]+", "-", name).strip("-")[:80].strip("-") or "object"
+
+
+def object_stems(names: list[str]) -> dict[str, str]:
+    """Object name -> a file stem no other object of the scene shares, in any letter case: "Drawer" and "drawer",
+    or "kid's drawer" and "kid s drawer", have one slug, so the second and later get their position appended."""
+    stems: dict[str, str] = {}
+    taken: set[str] = set()
+    for i, name in enumerate(names):
+        stem = base = slug(name)
+        n = i + 1
+        while stem.casefold() in taken:
+            stem, n = f"{base}-{n}", n + 1
+        taken.add(stem.casefold())
+        stems[name] = stem
+    return stems
 
 
 def render_sweeps(run_dir: str | Path, data_dir: str | Path, out_dir: str | Path, *, steps: int = 5,
@@ -51,12 +67,13 @@ def render_sweeps(run_dir: str | Path, data_dir: str | Path, out_dir: str | Path
                      "width": camera.width, "height": camera.height, "base_state": base, "objects": {}}
     start = time.perf_counter()
     jobs = [(name, k, v) for name in run.objects for k, v in enumerate(values)]
+    stems = object_stems(list(run.objects))
     with atomic_dir(out_dir, "sweep", inputs=[run_dir, data_dir], legacy=["sweep.json"]) as tmp:
         for name, k, value in tqdm(jobs, desc="sweep", disable=not progress):
             states = dict(base, **{name: value})
             out = run.render(camera, frame.c2w, states, frame_index=index)
             rgb = np.clip(np.asarray(out["rgb"])[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8)
-            file = f"{slug(name)}_{k:02d}.png"
+            file = f"{stems[name]}_{k:02d}.png"
             if not cv2.imwrite(str(tmp / file), rgb):
                 raise OSError(f"could not write {tmp / file}")
             entry = summary["objects"].setdefault(name, {"values": values, "images": []})

@@ -3,6 +3,7 @@ other objects held where the run renders that view, saved as RGB under file-safe
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import cv2
@@ -30,9 +31,39 @@ TINY = [
 
 
 def test_slug_keeps_names_file_safe():
-    assert slug("Küchen schublade/2") == "K-chen-schublade-2"
+    assert slug("Küchen schublade/2") == "Küchen-schublade-2"
     assert slug("door_1-a") == "door_1-a"
-    assert slug("冷蔵庫") == "object"
+    assert slug("冷蔵庫") == "冷蔵庫"
+    assert slug("../..") == "object"
+    assert len(slug("x" * 300)) == 80
+
+
+def test_every_object_gets_its_own_images_whatever_its_name(tiny_dataset, tmp_path, monkeypatch):
+    """Names with no ASCII letter, names that differ in letter case only or in punctuation only: before, the two
+    non-ASCII names were both 'object' and wrote each other's images, and so did the other pairs on a file
+    system that ignores case."""
+    names = ["冰箱", "шкаф", "Drawer", "drawer", "kid's drawer", "kid s drawer"]
+    ds = tiny_dataset
+    (ds.root / "mapping.yaml").write_text("".join(f"{i + 1}: {json.dumps(n)}\n" for i, n in enumerate(names)))
+
+    class Stub:  # renders each object's state as its own grey level, so a file written twice is seen
+        objects, state_mode, frame_ids = names, "given", []
+
+        def render(self, camera, c2w, states, frame_index=None):
+            k = [n for n in names if states[n] == 1.0 and base[n] != 1.0]
+            return {"rgb": np.full((camera.height, camera.width, 3), (names.index(k[0]) + 1) / 10 if k else 0.0)}
+
+    base = {n: 0.0 for n in names}
+    monkeypatch.setattr("stages.model.load_run", lambda *a, **k: Stub())
+    monkeypatch.setattr("stages.report.sweep.read_scene", lambda root: ds.__class__(
+        **{**ds.__dict__, "objects": names, "object_ids": list(range(1, 7)),
+           "frames": [dataclasses.replace(f, state=base) for f in ds.frames]}))
+    summary = render_sweeps("run", ds.root, tmp_path / "sweep", steps=2, scale=1.0, progress=False)
+    files = [summary["objects"][n]["images"][1] for n in names]
+    assert len({f.casefold() for f in files}) == len(names), files
+    assert files[0].startswith("冰箱") and files[1].startswith("шкаф")
+    for i, f in enumerate(files):
+        assert cv2.imread(str(tmp_path / "sweep" / f))[0, 0, 0] == int(255 * (i + 1) / 10 + 0.5), f
 
 
 def test_each_object_is_swept_from_0_to_1_at_the_view(tiny_dataset, tmp_path, monkeypatch):
