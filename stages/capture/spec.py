@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from stages.scene import InputError, read_yaml_mapping
-from stages.scene.dataset import object_name_problem
+from stages.scene.dataset import names_read_alike, object_name_problem
 from stages.scene.typed_yaml import from_mapping
 
 OBJECT_KINDS = ("door", "drawer", "lid")
@@ -321,6 +321,8 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise CaptureSpecError(path, f"object names {dupes} appear more than once", "give each object a unique name")
+    if (problem := names_read_alike(names)) is not None:
+        raise CaptureSpecError(path, problem, "rename one of them in words (e.g. 'left drawer')")
     for i, o in enumerate(spec.objects):
         where = f"objects[{i}] ({o.name})"
         if (problem := object_name_problem(o.name)) is not None:

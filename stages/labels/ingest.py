@@ -27,6 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from stages.scene import atomic_dir, label_map_to_onehot, write_json, write_mask, write_yaml
+from stages.scene.dataset import names_read_alike
 from stages.scene.masks import UNRELIABLE_DIVISOR, USUAL_QUANTILE, USUAL_SHARE, unreliable_masks
 
 from .coco_labels import read_coco_labels
@@ -152,6 +153,8 @@ def ingest_labels(config: LabelsConfig) -> dict:
     label_set = open_label_set(config)
     if not label_set.names:
         raise LabelError(config.input, "the label set names no objects", "add at least one object")
+    if (problem := names_read_alike(list(label_set.names))) is not None:  # COCO categories, LabelMe labels, folders
+        raise LabelError(config.input, problem, "rename one of them in words (e.g. 'left drawer')")
     if not label_set.entries:
         raise LabelError(config.input, f"no {label_set.format} label files found",
                          "point --input at the masks, or pass the --format they are in")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from stages.scene import read_yaml_mapping
-from stages.scene.dataset import object_name_problem
+from stages.scene.dataset import names_read_alike, object_name_problem
 
 from .errors import LabelError
 
@@ -61,6 +61,8 @@ def read_name_table(path: str | Path) -> NameTable:
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise LabelError(path, f"object names {dupes} appear more than once", "give each object one unique name")
+    if (problem := names_read_alike(names)) is not None:
+        raise LabelError(path, problem, "rename one of them in words (e.g. 'left drawer')")
     return NameTable(ids=tuple(i for i, _ in items), names=tuple(names), path=path)
 
 

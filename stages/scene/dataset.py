@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import posixpath
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -222,6 +223,21 @@ def object_name_problem(name: str) -> str | None:
     return None
 
 
+def names_read_alike(names: list[str]) -> str | None:
+    """Why two of ``names`` cannot name two objects, or None: names that differ only in letter case or punctuation
+    ("Drawer" and "drawer", "drawer-2" and "drawer 2") read the same in a language command or relevancy query (names
+    compare in lower case, words only: stages.language.vocabulary.normalize_phrase), so neither can be named; and
+    on a file system that ignores case their files (``objects/<name>_mesh.ply``) would be one."""
+    seen: dict[str, str] = {}
+    for name in names:
+        key = " ".join(re.findall(r"[^\W_]+", name.lower().replace("_", " ")))
+        if key and key in seen and seen[key] != name:
+            return (f"object names {seen[key]!r} and {name!r} differ only in letter case or punctuation, so a "
+                    f"command or query reads both as {key!r}")
+        seen.setdefault(key, name)
+    return None
+
+
 def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
     if not path.is_file():
         return [], []
@@ -240,6 +256,8 @@ def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise SceneError(path, f"object names {dupes} appear more than once", "give each object one unique name")
+    if (problem := names_read_alike(names)) is not None:
+        raise SceneError(path, problem, "rename one of them in words (e.g. 'left drawer')")
     return [i for i, _ in items], names
 
 
