@@ -50,8 +50,12 @@ def read_name_table(path: str | Path) -> NameTable:
             ident = int(key)
         except (TypeError, ValueError) as exc:
             raise LabelError(path, f"id {key!r} is not an integer", "write {int_id: object_name}") from exc
+        if isinstance(value, bool):  # YAML reads yes / no / on / off / true / false unquoted as a boolean
+            raise LabelError(path, f"id {ident}: YAML reads the name as the boolean {value}, not as words",
+                             f"quote the name: `{ident}: 'yes'` (or whichever word it is)")
         if not isinstance(value, str | int | float) or not str(value).strip():
-            raise LabelError(path, f"id {ident} has no object name ({value!r})", "write `<id>: <object name>`")
+            raise LabelError(path, f"id {ident} has no object name ({value!r})",
+                             "write `<id>: <object name>` (quote a name YAML reads otherwise: `1: 'null'`)")
         items.append((ident, str(value).strip()))
     items.sort()
     names = [n for _, n in items]

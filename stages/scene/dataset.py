@@ -244,6 +244,9 @@ def _read_mapping(path: Path) -> tuple[list[int], list[str]]:
     raw = read_yaml_mapping(path, "{int_id: object_name}")
     items: list[tuple[int, str]] = []
     for k, v in raw.items():
+        if isinstance(v, bool) or v is None:  # yes / on / null unquoted: YAML's boolean or nothing, not the word
+            raise SceneError(path, f"id {k!r}: YAML reads the name as {v}, not as words",
+                             f"quote the name: `{k}: 'yes'` (or whichever word it is)")
         try:
             items.append((int(k), str(v)))
         except (TypeError, ValueError) as exc:

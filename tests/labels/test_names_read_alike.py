@@ -46,3 +46,19 @@ def test_names_that_only_look_alike_are_kept(tmp_path):
     (source / "mapping.yaml").write_text(yaml.safe_dump(dict(zip((3, 5, 7), names, strict=True)), allow_unicode=True))
     ingest_labels(LabelsConfig(input=source, frames=frames, out=tmp_path / "labels", progress=False))
     assert list(yaml.safe_load((tmp_path / "labels" / "mapping.yaml").read_text()).values()) == names
+
+
+@pytest.mark.parametrize("word", ["yes", "on", "No", "TRUE", "null"])
+def test_a_name_yaml_reads_as_a_boolean_or_nothing_is_refused_with_the_quoting_fix(tmp_path, tiny_dataset, word):
+    """`1: yes` in a hand-written mapping.yaml was the object "True" (and `1: on` too) in every later file."""
+    frames = write_frames(tmp_path)
+    source = write_png(tmp_path, make_label_maps())
+    (source / "mapping.yaml").write_text(f"3: {word}\n5: drawer\n7: fridge\n")
+    with pytest.raises(LabelError, match=r"mapping\.yaml: id 3.*fix: .*(quote the name|`1: 'null'`)"):
+        ingest_labels(LabelsConfig(input=source, frames=frames, out=tmp_path / "labels", progress=False))
+    (tiny_dataset.root / "mapping.yaml").write_text(f"1: {word}\n2: drawer\n3: fridge\n")
+    with pytest.raises(SceneError, match=r"mapping\.yaml: id 1: YAML reads the name as .*fix: quote the name"):
+        read_scene(tiny_dataset.root)
+    (source / "mapping.yaml").write_text(f"3: '{word}'\n5: drawer\n7: fridge\n")
+    ingest_labels(LabelsConfig(input=source, frames=frames, out=tmp_path / "labels", progress=False))
+    assert yaml.safe_load((tmp_path / "labels" / "mapping.yaml").read_text())[1] == word
