@@ -160,7 +160,7 @@ def _read_livescene(path: Path) -> list[KeyValue]:
                              "write {<name>_<fid>: {object: value}}")
         for obj_node, val_node in value_node.value:
             vrow = obj_node.start_mark.line + 1
-            obj = str(_scalar(obj_node))
+            obj = str(_scalar(obj_node)).strip()  # as the labels stage and the CSV reader take a name
             value = _number(path, vrow, f"frame {key!r}, object {obj!r}", _scalar(val_node))
             out.append(KeyValue(index, obj, value, vrow))
     return out

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from stages.scene import atomic_dir, read_yaml_mapping, write_json, write_yaml
+from stages.labels.name_table import read_name_table
+from stages.scene import atomic_dir, write_json, write_yaml
 from stages.scene.key_frame_states import key_value_range
 
 from .annotations import AnnotationFormat, Annotations, KeyValue, read_annotations
@@ -57,11 +58,8 @@ def load_objects(config: StatesConfig, annotations: Annotations) -> list[str] | 
     if config.mapping is not None:
         if annotations.format == "conerf":
             return annotations.objects
-        raw = read_yaml_mapping(config.mapping, "{int_id: object_name}", error=StateError)
-        try:
-            return [str(v) for _, v in sorted((int(k), v) for k, v in raw.items())]
-        except (TypeError, ValueError) as exc:
-            raise StateError(config.mapping, "ids are not all integers", "write {int_id: object_name}") from exc
+        # read as the labels stage reads it (names stripped, checked), so both stages name the objects alike
+        return list(read_name_table(config.mapping).names)
     return annotations.objects
 
 
