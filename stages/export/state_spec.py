@@ -24,7 +24,10 @@ def parse_state_string(text: str, objects: Sequence[str], where: str = "--states
     """
     out: dict[str, float] = {}
     every: float | None = None
-    for item in (p.strip() for p in text.split(",")):
+    items: list[str] = []
+    for part in text.split(","):  # a part without '=' is the start of a name holding a comma ("left, top drawer=1")
+        items.append(f"{items.pop()},{part}" if items and items[-1].strip() and "=" not in items[-1] else part)
+    for item in (p.strip() for p in items):
         if not item:
             continue
         if "=" not in item:

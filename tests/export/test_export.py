@@ -455,3 +455,13 @@ def test_objects_need_one_probability_per_object_and_the_background(tiny_capture
 
     with pytest.raises(InputError, match=r"--objects needs per-object probabilities"):
         export_run(NoBackground(renderer), ds, [{}], tmp_path / "x", ExportOptions(objects=True), progress=False)
+
+
+def test_an_object_whose_name_holds_a_comma_can_be_given_a_state():
+    """--states splits at commas: "left, top drawer=1" was refused ("'left' ... is not OBJECT=VALUE"), so such an
+    object could only be exported with every other object at its state (all=V)."""
+    objects = ["left, top drawer", "cabinet"]
+    assert parse_state_string("left, top drawer=1, cabinet=0", objects) == {"left, top drawer": 1.0, "cabinet": 0.0}
+    assert parse_state_string(",cabinet=1,left, top drawer=0.5,", objects) == {"cabinet": 1.0, "left, top drawer": 0.5}
+    with pytest.raises(InputError, match="unknown object 'cabinet, drawer'"):
+        parse_state_string("cabinet, drawer=1", objects)
