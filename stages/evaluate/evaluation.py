@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from stages.frames.selection import downscale_factor
 from stages.scene import Camera, Frame, InputError, SceneDataset, SceneError, atomic_dir, write_json
+from stages.scene.dataset import fit_file_name
 from stages.scene.machine import machine_info
 
 from .locality import locality
@@ -118,7 +119,7 @@ def _cut(views: int, asked: int, available: int) -> bool:
 def grounding_figure(source: str, query: str, frame_id: str) -> str:
     """The file name of a relevancy map in ``grounding/``: the query's letters of any script kept, spaces as '-',
     path separators replaced (the report finds the map by this name)."""
-    stem = query.replace(" ", "-").replace("/", "-").replace("\\", "-")
+    stem = fit_file_name(query.replace(" ", "-").replace("/", "-").replace("\\", "-"))
     return f"{source}_{stem}_{frame_id}.png"
 
 

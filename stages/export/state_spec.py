@@ -10,9 +10,10 @@ import re
 from collections.abc import Sequence
 
 from stages.scene import InputError
+from stages.scene.dataset import fit_file_name
 from stages.scene.state_values import split_assignment, state_value
 
-_SLUG_UNSAFE = re.compile(r"[^A-Za-z0-9.-]+")
+_SLUG_UNSAFE = re.compile(r"[^\w.-]+|_")  # letters and digits of any script kept ("冰箱"), '_' is the separator
 
 
 def parse_state_string(text: str, objects: Sequence[str], where: str = "--states") -> dict[str, float]:
@@ -58,4 +59,4 @@ def state_slug(states: dict[str, float]) -> str:
     """A folder name for one combination: ``cabinet-1_drawer-0`` (names made file-system safe)."""
     # 12 significant digits: states that differ in the 7th (0.1234567, 0.1234568) are two folders, not a clash
     parts = [f"{_SLUG_UNSAFE.sub('-', name)}-{value:.12g}" for name, value in states.items()]
-    return "_".join(parts) or "no-objects"
+    return fit_file_name("_".join(parts)) or "no-objects"

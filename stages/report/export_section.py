@@ -10,6 +10,8 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
+from stages.scene.dataset import fit_file_name
+
 from .html_parts import fmt, missing, table
 from .images import file_data_uri
 from .scene_data import read_json
@@ -48,7 +50,7 @@ def _one_method(method: str, folder: Path) -> str:
         row = [_states(ex.get("states") or {}), _count(mesh), _mib((mesh or {}).get("bytes")), _count(points),
                _mib((points or {}).get("bytes"))]
         if with_parts:
-            row += [_count(files.get(f"objects/{o}_mesh")) for o in objects]
+            row += [_count(files.get(f"objects/{fit_file_name(o)}_mesh")) for o in objects]  # the exporter's file_stem
         row += [t.get("render"), t.get("fuse"), t.get("extract"), t.get("write"), t.get("total")]
         rows.append(row)
         uri = file_data_uri(folder / ex["thumbnail"]) if ex.get("thumbnail") else None

@@ -17,6 +17,7 @@ Layout (that of the published LiveScene sets, plus optional extensions)::
 
 from __future__ import annotations
 
+import hashlib
 import json
 import posixpath
 import re
@@ -221,6 +222,16 @@ def object_name_problem(name: str) -> str | None:
     if any(ord(c) < 32 for c in name):
         return "holds a control character"
     return None
+
+
+def fit_file_name(stem: str, limit: int = 160) -> str:
+    """``stem`` when its UTF-8 form is at most ``limit`` bytes, else its start and a hash of the whole: a file name
+    holds 255 bytes, and a stem built from object names (three names of 100 letters, or 100 CJK characters, which
+    take 3 bytes each) passes that."""
+    raw = stem.encode()
+    if len(raw) <= limit:
+        return stem
+    return raw[:limit - 11].decode(errors="ignore") + "-" + hashlib.sha1(raw).hexdigest()[:10]
 
 
 def names_read_alike(names: list[str]) -> str | None:
