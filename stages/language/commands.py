@@ -202,6 +202,21 @@ def _protect(raw: str, protected: Sequence[str]) -> tuple[str, dict[str, str]]:
     return raw, tokens
 
 
+def _join_names(command: str, aliases: Sequence[str]) -> tuple[str, dict[str, str]]:
+    """Names that hold a clause separator ("left, top drawer", "salt and pepper drawer") replaced by one token each,
+    so that splitting the command does not cut the name into two clauses (each naming an object of its own)."""
+    text, tokens = command.lower(), {}  # split_clauses lower-cases it too
+    for k, alias in enumerate(sorted(aliases, key=len, reverse=True)):
+        if " " not in alias:
+            continue
+        token = f"zqjoinzq{chr(97 + k % 26)}{k}"
+        pattern = r"\b" + r"\W+".join(re.escape(w) for w in alias.split()) + r"\b"
+        text = re.sub(pattern, lambda m, t=token: f" {t} " if _SPLIT.search(m.group(0)) else m.group(0), text)
+        if token in text:
+            tokens[token] = alias
+    return text, tokens
+
+
 def _parse_clause(raw: str, previous: _Clause | None, command: str, protected: Sequence[str],
                   vocabulary_words: set[str]) -> _Clause:
     raw, tokens = _protect(raw, protected)
@@ -307,7 +322,13 @@ class CommandParser:
         states = self._initial(current)
         shown = command if len(command) <= LONGEST_SHOWN else command[: LONGEST_SHOWN - 3] + "..."
         # a clause of politeness alone ("..., please?") is no clause
-        clauses = [c for c in split_clauses(command) if set(normalize_phrase(c).split()) - FILLERS - {"thanks"}]
+        joined, names = _join_names(command, [a for e in self.vocabulary.entries for a in e.aliases])
+        clauses = []
+        for clause in split_clauses(joined):
+            for token, alias in names.items():
+                clause = clause.replace(token, alias)
+            clauses.append(clause)
+        clauses = [c for c in clauses if set(normalize_phrase(c).split()) - FILLERS - {"thanks"}]
         if not clauses:
             raise CommandError(GRAMMAR, "empty command", 'say e.g. "open the fridge"')
         if (m := re.search(r"\d,\d", command)) is not None:  # a decimal comma: the comma would split the clause
