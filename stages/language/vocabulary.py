@@ -93,7 +93,12 @@ class ObjectVocabulary:
                      source: str | Path = "prompts.yaml") -> ObjectVocabulary:
         """Objects in state-vector order plus the ``prompts.yaml`` content (may be empty or partial)."""
         prompts = dict(prompts or {})
-        unknown = sorted(set(map(str, prompts)) - set(objects))
+        words = [k for k in prompts if isinstance(k, bool) or k is None]  # yes / on / null unquoted
+        if words:
+            raise InputError(source, f"YAML reads the keys {words} as booleans or nothing, not as object names",
+                             "quote the name: `'yes': {synonyms: [...]}` (or whichever word it is)")
+        prompts = {str(k): v for k, v in prompts.items()}  # `2:` names the object "2" as mapping.yaml's `1: '2'`
+        unknown = sorted(set(prompts) - set(objects))
         if unknown:
             raise InputError(source, f"prompts for unknown objects {unknown}",
                              f"key prompts.yaml on the names of mapping.yaml {list(objects)}")
