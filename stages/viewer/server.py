@@ -17,6 +17,7 @@ camera, which a background thread per client keeps up to date (render_loop.py).
 from __future__ import annotations
 
 import contextlib
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -42,6 +43,13 @@ FRUSTUM_LINE_PX = 1.5
 THUMBNAIL_WIDTH = 64
 MAX_THUMBNAILS = 400
 """Frustums carry a small image of their frame up to this many frames (each costs a read at start-up)."""
+
+
+def md_text(text: str) -> str:
+    """``text`` (a typed command or query, an object name, an error) shown as itself in a viser markdown element:
+    viser renders raw HTML there unsanitised, to every client, and markdown syntax, so an object called
+    "<b>drawer" or "kid_s *big* drawer", or a command holding a tag, would be markup."""
+    return re.sub(r"([\\`*_\[\]~])", r"\\\1", str(text).replace("&", "&amp;").replace("<", "&lt;"))
 
 
 def slider_hint(name: str, lo_hi: list[float] | None) -> str:
@@ -249,15 +257,15 @@ class LiveViewer:
             self.language_status.content = 'Type a command first, e.g. "open the fridge".'
             return
         if not self.language.encoder_loaded:
-            self.language_status.content = f"Running *{text}* ..."
+            self.language_status.content = f"Running *{md_text(text)}* ..."
         try:
             result = self.apply_command(text)
         except InputError as exc:
-            self.language_status.content = f"**Not applied:** {exc.problem}. *Fix:* {exc.fix}"
+            self.language_status.content = f"**Not applied:** {md_text(exc.problem)}. *Fix:* {md_text(exc.fix)}"
             return
         moved = ", ".join(f"{a.object} -> {a.value:.2f} ({a.method})" for a in result.actions)
         unread = "" if self.reads_states else f" (the image does not change: {self.run.STATES_UNREAD})"
-        self.language_status.content = f"*{text}*: {moved}{unread}"
+        self.language_status.content = f"*{md_text(text)}*: {md_text(moved)}{md_text(unread)}"
 
     def show_relevancy(self, query: str, source: str | None = None) -> None:
         """Show the relevancy map of ``query`` instead of colour (loads the text encoder the first time)."""
@@ -278,12 +286,12 @@ class LiveViewer:
         try:
             self.show_relevancy(query)
         except InputError as exc:
-            self.language_status.content = f"**No map:** {exc.problem}. *Fix:* {exc.fix}"
+            self.language_status.content = f"**No map:** {md_text(exc.problem)}. *Fix:* {md_text(exc.fix)}"
             return
         match = self.language.grounder().query_match(query)
         nothing = "" if match["object"] else (" It names no object of the scene, so the map shows the object "
                                               "nearest in meaning, not a match.")
-        self.language_status.content = f"Relevancy of *{query}* ({self._source}): blue 0 .. red 1.{nothing}"
+        self.language_status.content = f"Relevancy of *{md_text(query)}* ({self._source}): blue 0 .. red 1.{nothing}"
 
     def show_colour(self) -> None:
         with self._lock:
@@ -329,7 +337,7 @@ class LiveViewer:
 
     def _render_failed(self, client_id: int, request: RenderRequest, exc: BaseException) -> None:
         problem = exc.problem if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
-        self.render_status.content = f"**Render failed:** {problem}"
+        self.render_status.content = f"**Render failed:** {md_text(problem)}"
 
     def wait_for_clients(self, count: int = 1, timeout: float = 60.0) -> list[ClientSession]:
         """Block until ``count`` clients are connected (tests, the benchmark)."""
