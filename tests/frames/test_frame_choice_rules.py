@@ -90,3 +90,15 @@ def test_a_frame_after_a_damaged_one_is_no_repeat(tmp_path: Path) -> None:
     summary = extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
     assert summary["dropped_frame_count"] == 1 and summary["repeated_frame_count"] == 0
     assert summary["kept_repeats"] == []
+
+
+def test_a_repeat_is_the_frame_before_to_the_last_pixel(tmp_path: Path) -> None:
+    """A, A, A' (A with its last pixel changed), A: only the second A repeats the frame before it; the frame before
+    the last A is A', and one changed pixel makes a new picture."""
+    a = textured_frame(0)
+    changed = a.copy()
+    changed[-1, -1] = 255 - changed[-1, -1]
+    folder = _folder(tmp_path, {"frame_0000.png": a, "frame_0001.png": a, "frame_0002.png": changed,
+                                "frame_0003.png": a})
+    summary = extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
+    assert summary["repeated_frame_count"] == 1 and summary["kept_repeats"] == ["frame_00001.png"]
