@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from stages.scene import frame_id_of
@@ -59,14 +60,25 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
                 raise LabelError(path, "id map has colour channels that differ (an RGB image, not ids)",
                                  "save a single-channel (grey) or palette PNG whose values are the object ids")
             img = img[..., 0]
-        values = np.unique(img)
+        values = _values(img)
         unknown = [int(v) for v in values if not known[int(v)]]
         if unknown:
             raise LabelError(path, f"pixel values {unknown} are no id of {table.path}",
                              f"add them to the name table or relabel those pixels (known ids {list(table.ids)})")
+        if img.dtype == np.uint8:  # OpenCV's table lookup: a tenth of numpy's indexing on a 4K mask
+            return LabelMap(cv2.LUT(np.ascontiguousarray(img), lut[:256]))
         return LabelMap(lut[img].astype(np.uint16))
 
     return load
+
+
+def _values(img: np.ndarray) -> np.ndarray:
+    """The pixel values of an id map, ascending (``np.unique``); an 8-bit map's from its histogram, which takes
+    a fifth of the time on a 4K mask."""
+    if img.dtype == np.uint8:
+        counts = cv2.calcHist([np.ascontiguousarray(img)], [0], None, [256], [0, 256]).ravel()
+        return np.flatnonzero(counts)
+    return np.unique(img)
 
 
 def read_mask_image(path: Path) -> np.ndarray:

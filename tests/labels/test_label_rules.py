@@ -124,3 +124,30 @@ def test_an_id_map_whose_red_channel_alone_differs_is_refused(tmp_path: Path) ->
     label_set = read_png_labels(tmp_path, NameTable(ids=(3,), names=("door",), path=None))
     with pytest.raises(LabelError, match="id map has colour channels that differ"):
         label_set.entries[0].load()
+
+
+def test_an_8_bit_and_a_16_bit_id_map_read_alike(tmp_path: Path) -> None:
+    """The 8-bit reading (histogram, table lookup) gives the ids, and names the unknown values, as the 16-bit one
+    (numpy) does: ids 7 and 200 (out of order in the name table), 0 background, 255 unknown."""
+    import cv2
+
+    from stages.labels.name_table import NameTable
+    from stages.labels.png_labels import read_png_labels
+
+    ids = np.array([[0, 200, 7], [7, 0, 200]], np.uint8)
+    table = NameTable(ids=(200, 7), names=("door", "drawer"), path=tmp_path / "mapping.yaml")
+    for depth, folder in ((np.uint8, tmp_path / "a"), (np.uint16, tmp_path / "b")):
+        folder.mkdir()
+        assert cv2.imwrite(str(folder / "frame_00000.png"), ids.astype(depth))
+        bad = ids.astype(depth)
+        bad[1, 1] = 255
+        assert cv2.imwrite(str(folder / "frame_00001.png"), bad)
+    maps = []
+    for folder in (tmp_path / "a", tmp_path / "b"):
+        entries = read_png_labels(folder, table).entries
+        labels = entries[0].load().labels
+        assert labels.dtype == np.uint16
+        maps.append(labels)
+        with pytest.raises(LabelError, match=r"pixel values \[255\] are no id"):
+            entries[1].load()
+    assert np.array_equal(maps[0], [[0, 1, 2], [2, 0, 1]]) and np.array_equal(maps[0], maps[1])
