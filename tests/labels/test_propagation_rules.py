@@ -135,3 +135,14 @@ def test_a_round_trip_that_misses_is_an_occlusion_past_the_tolerance_and_widens_
     kept = propagate_to(UnclosedFlows(0.6), key, 0, n_labels=2)
     np.testing.assert_array_equal(kept.labels[0], halves(1)[0])
     assert kept.confidence[0, 4] == pytest.approx(phi(0.5 / math.sqrt(0.34)), abs=1e-4)  # Phi(0.8575) = 0.804
+
+
+def test_the_squared_length_is_numpys_sum_to_the_bit() -> None:
+    """The tracking step's x^2 + y^2 gives the float32 values of ``(v ** 2).sum(-1)``, so masks and confidence maps
+    stay byte for byte what they were."""
+    from stages.labels.propagation import _squared_length
+
+    v = np.random.default_rng(0).normal(scale=30.0, size=(37, 53, 2)).astype(np.float32)
+    v[0, 0] = [1e-30, 1e-3]  # a square that underflows beside a small one
+    assert _squared_length(v).dtype == np.float32
+    assert _squared_length(v).tobytes() == (v ** 2).sum(-1).tobytes()
