@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from stages.scene import Camera, InputError, SceneDataset, atomic_dir, write_json
-from stages.scene.dataset import fit_file_name
+from stages.scene.dataset import file_stem
 
 from .mesh_io import FORMATS, write_geometry
 from .object_parts import ObjectPartFusion
@@ -30,13 +30,6 @@ from .world_up import world_up_axis
 
 EXPORT_FORMAT = 1
 """Version of export.json (bump when its keys change: the report reads it)."""
-
-
-def file_stem(name: str) -> str:
-    """An object name as a file name: path separators and a bare '.' / '..' replaced (names are checked where they
-    are read; this keeps a file inside its folder whatever reaches it)."""
-    stem = name.replace("/", "-").replace("\\", "-")
-    return "_" if stem.strip() in ("", ".", "..") else fit_file_name(stem)
 
 
 class Renderable(Protocol):

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from .encoder import TextEncoder
@@ -190,31 +190,18 @@ def split_clauses(command: str) -> list[str]:
     return [c for c in _SPLIT.split(text) if c.strip()]
 
 
-def _protect(raw: str, protected: Sequence[str]) -> tuple[str, dict[str, str]]:
-    """Names that hold amount words ("half door") replaced by tokens the amount rules leave alone."""
+def _protect(raw: str, protected: Sequence[str], when: Callable[[str], object] = bool) -> tuple[str, dict[str, str]]:
+    """Names replaced by tokens that later rules leave alone, where ``when(matched text)`` holds: names that hold
+    amount words ("half door") for the amount rules, names that hold a clause separator ("left, top drawer")
+    for the split into clauses (which would cut them into two objects)."""
     tokens: dict[str, str] = {}
     for k, alias in enumerate(sorted(protected, key=len, reverse=True)):
         pattern = r"\b" + r"\W+".join(re.escape(w) for w in alias.split()) + r"\b"
         token = f"zqnamezq{chr(97 + k % 26)}{k}"
-        raw, n = re.subn(pattern, f" {token} ", raw)
-        if n:
+        raw = re.sub(pattern, lambda m, t=token: f" {t} " if when(m.group(0)) else m.group(0), raw)
+        if token in raw:
             tokens[token] = alias
     return raw, tokens
-
-
-def _join_names(command: str, aliases: Sequence[str]) -> tuple[str, dict[str, str]]:
-    """Names that hold a clause separator ("left, top drawer", "salt and pepper drawer") replaced by one token each,
-    so that splitting the command does not cut the name into two clauses (each naming an object of its own)."""
-    text, tokens = command.lower(), {}  # split_clauses lower-cases it too
-    for k, alias in enumerate(sorted(aliases, key=len, reverse=True)):
-        if " " not in alias:
-            continue
-        token = f"zqjoinzq{chr(97 + k % 26)}{k}"
-        pattern = r"\b" + r"\W+".join(re.escape(w) for w in alias.split()) + r"\b"
-        text = re.sub(pattern, lambda m, t=token: f" {t} " if _SPLIT.search(m.group(0)) else m.group(0), text)
-        if token in text:
-            tokens[token] = alias
-    return text, tokens
 
 
 def _parse_clause(raw: str, previous: _Clause | None, command: str, protected: Sequence[str],
@@ -321,13 +308,15 @@ class CommandParser:
         """Apply ``command`` to ``current`` states (default: every object closed) and return the result."""
         states = self._initial(current)
         shown = command if len(command) <= LONGEST_SHOWN else command[: LONGEST_SHOWN - 3] + "..."
-        # a clause of politeness alone ("..., please?") is no clause
-        joined, names = _join_names(command, [a for e in self.vocabulary.entries for a in e.aliases])
+        aliases = [a for e in self.vocabulary.entries for a in e.aliases]
+        # names holding a separator kept whole through the split (split_clauses lower-cases the command too)
+        joined, names = _protect(command.lower(), [a for a in aliases if " " in a], when=_SPLIT.search)
         clauses = []
         for clause in split_clauses(joined):
             for token, alias in names.items():
                 clause = clause.replace(token, alias)
             clauses.append(clause)
+        # a clause of politeness alone ("..., please?") is no clause
         clauses = [c for c in clauses if set(normalize_phrase(c).split()) - FILLERS - {"thanks"}]
         if not clauses:
             raise CommandError(GRAMMAR, "empty command", 'say e.g. "open the fridge"')
@@ -339,7 +328,6 @@ class CommandParser:
                                "verb alone, it would do what it forbids)",
                                f'say what to do, e.g. "close the {(self.objects or ["fridge"])[0]}", or leave the '
                                "object out")
-        aliases = [a for e in self.vocabulary.entries for a in e.aliases]
         vocabulary_words = {w for a in aliases for w in a.split()}
         protected = [a for a in aliases if set(a.split()) & AMOUNT_WORDS]
         parsed: list[_Clause] = []

@@ -10,7 +10,7 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from stages.scene.dataset import fit_file_name
+from stages.scene.dataset import file_stem
 
 from .html_parts import fmt, missing, table
 from .images import file_data_uri
@@ -50,7 +50,7 @@ def _one_method(method: str, folder: Path) -> str:
         row = [_states(ex.get("states") or {}), _count(mesh), _mib((mesh or {}).get("bytes")), _count(points),
                _mib((points or {}).get("bytes"))]
         if with_parts:
-            row += [_count(files.get(f"objects/{fit_file_name(o)}_mesh")) for o in objects]  # the exporter's file_stem
+            row += [_count(files.get(f"objects/{file_stem(o)}_mesh")) for o in objects]  # the exporter's names
         row += [t.get("render"), t.get("fuse"), t.get("extract"), t.get("write"), t.get("total")]
         rows.append(row)
         uri = file_data_uri(folder / ex["thumbnail"]) if ex.get("thumbnail") else None

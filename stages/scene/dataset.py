@@ -234,6 +234,13 @@ def fit_file_name(stem: str, limit: int = 160) -> str:
     return raw[:limit - 11].decode(errors="ignore") + "-" + hashlib.sha1(raw).hexdigest()[:10]
 
 
+def file_stem(name: str) -> str:
+    """An object name as a file name: path separators and a bare '.' / '..' replaced (names are checked where they
+    are read; this keeps a file inside its folder whatever reaches it), long names fitted (``fit_file_name``)."""
+    stem = name.replace("/", "-").replace("\\", "-")
+    return "_" if stem.strip() in ("", ".", "..") else fit_file_name(stem)
+
+
 def names_read_alike(names: list[str]) -> str | None:
     """Why two of ``names`` cannot name two objects, or None: names that differ only in letter case or punctuation
     ("Drawer" and "drawer", "drawer-2" and "drawer 2") read the same in a language command or relevancy query (names
