@@ -293,6 +293,23 @@ def _inside_room(room: list[float], position: list[float], size: list[float], ya
             "move it inside the room (its position is the centre of its footprint's bottom face) or make it smaller")
 
 
+def _joint_range(o: ObjectSpec, path: Path, where: str) -> None:
+    """An object's ``limits`` must open it (closed < open, 0 = shut against the carcass) without passing through
+    its own carcass: a door or lid by at most 180 degrees, a drawer by at most its tray's depth (the carcass depth
+    less the front panel and 1 cm of runners, ``geometry._articulated``), so the tray never leaves its runners."""
+    closed, opened = (float(v) for v in o.limits)
+    if o.kind == "drawer":
+        reach, unit = o.size[1] - o.thickness - 0.01, "m"
+        fix = f"give [closed, open] in metres with 0 <= closed < open <= {reach:.3g} (the tray's depth)"
+    else:
+        reach, unit = 180.0, "degrees"
+        fix = "give [closed, open] in degrees with 0 <= closed < open <= 180"
+    if not 0.0 <= closed < opened <= reach:
+        raise CaptureSpecError(path, f"{where}.limits {[closed, opened]} ({unit}) do not open the {o.kind} within "
+                               f"its range (state 0 = closed, 1 = open; a negative value moves it into its carcass)",
+                               fix)
+
+
 def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     """Reject specs that cannot be rendered, naming the key and the fix."""
     path = Path(path)
@@ -311,8 +328,14 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
                                "fix the render section")
     if not spec.render.lights:
         raise CaptureSpecError(path, "render.lights is empty", "add at least one light")
+    if not 0.0 <= spec.render.ambient <= 1.0:
+        raise CaptureSpecError(path, f"render.ambient {spec.render.ambient} is outside [0, 1]",
+                               "give the fraction of albedo seen in full shadow, e.g. 0.35")
     for i, light in enumerate(spec.render.lights):
         _vec(light.position, 3, path, f"render.lights[{i}].position")
+        if light.intensity < 0:
+            raise CaptureSpecError(path, f"render.lights[{i}].intensity {light.intensity} is negative (a light that "
+                                   "darkens)", "give an intensity >= 0, e.g. 0.7")
     if spec.mask_scope not in MASK_SCOPES:
         raise CaptureSpecError(path, f"mask_scope {spec.mask_scope!r} unknown", f"use one of {MASK_SCOPES}")
     if len(spec.objects) > 254:
@@ -337,6 +360,7 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
         _inside_room(spec.room, o.position, o.size, o.yaw_deg, path, where)
         if o.limits is not None:
             _vec(o.limits, 2, path, f"{where}.limits")
+            _joint_range(o, path, where)
         if not 0 < o.thickness < 0.5 * min(o.size):
             raise CaptureSpecError(path, f"{where}: thickness {o.thickness} must be > 0 and < half the smallest size",
                                    "use a panel thickness of a few centimetres")
@@ -371,6 +395,9 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
         raise CaptureSpecError(path, "camera.radius must be > 0", "give the orbit radius in metres")
     if spec.key_frames.every < 1 or spec.key_frames.noise_std < 0:
         raise CaptureSpecError(path, "key_frames.every >= 1 and noise_std >= 0 needed", "fix key_frames")
+    if spec.key_frames.decimals < 0:
+        raise CaptureSpecError(path, f"key_frames.decimals is {spec.key_frames.decimals}, which would round key "
+                               "values to tens", "give the decimals a person types, >= 0 (e.g. 2)")
     from .camera_path import camera_path  # imports this module
 
     camera_path(spec, path)  # refuses a camera on its target or looking straight down before any frame is rendered
