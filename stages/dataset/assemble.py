@@ -78,7 +78,7 @@ class AssembleConfig:
     test_fraction: float = 0.1
     """Test fraction of the fraction split."""
     copy_images: bool = False
-    """Copy images instead of hard-linking them (links fall back to copies across file systems)."""
+    """Copy images and masks instead of hard-linking them (links fall back to copies across file systems)."""
     progress: bool = True
     """Show a progress bar."""
 
@@ -189,6 +189,8 @@ def read_states(states: Path) -> tuple[dict[str, dict[str, float]], list[str], P
 
 
 def place_image(src: Path, dst: Path, copy: bool) -> None:
+    """``src`` at ``dst`` by a hard link (no second copy of a video's frames and masks: every stage replaces its
+    outputs by renaming new files in, so a link never sees its source change), or a copy."""
     if not copy:
         try:
             os.link(src, dst)
@@ -295,7 +297,7 @@ def assemble_scene(config: AssembleConfig) -> SceneDataset:
                                         "re-run `livescene labels` to write it again") from exc
                 check_mask_array(arr, src_mask, height, width, len(objects))
                 (tmp / "masks").mkdir(exist_ok=True)
-                shutil.copyfile(src_mask, mask_path(tmp, fid))
+                place_image(src_mask, mask_path(tmp, fid), config.copy_images)  # linked as the images are
         if config.labels is not None and frames and len(without_masks) == len(frames):
             raise AssembleError(config.labels / "masks", f"none of the {len(frames)} frames has a mask here "
                                 "(<frame id>.npy, as `livescene labels` writes them)",

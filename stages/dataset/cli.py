@@ -34,7 +34,7 @@ def build_parser(prog: str = "livescene dataset") -> argparse.ArgumentParser:
     a.add_argument("--split", default="alternate", choices=["alternate", "every_n", "fraction"])
     a.add_argument("--split-n", type=int, default=10, help="n of the every_n split")
     a.add_argument("--test-fraction", type=float, default=0.1, help="test share of the fraction split")
-    a.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
+    a.add_argument("--copy-images", action="store_true", help="copy images and masks instead of hard-linking them")
     a.add_argument("--out", required=True, type=Path, help="scene dataset folder to write")
     a.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     o = sub.add_parser("orient", help="copy a ready dataset into the upright, wall-aligned world")

@@ -101,6 +101,18 @@ def test_round_trip(tmp_path):
     assert scene_main(["validate", str(out)]) == 0  # the existing subcommands still work
 
 
+@pytest.mark.parametrize("copy", [False, True])
+def test_images_and_masks_are_linked_not_copied_unless_asked(tmp_path, copy):
+    paths = make_stage_outputs(tmp_path)
+    out = tmp_path / "ds"
+    assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"], labels=paths["labels"],
+                                  states=paths["states"], out=out, copy_images=copy, progress=False))
+    image, mask = out / "images" / "frame_00003.png", out / "masks" / "00003.npy"
+    assert image.samefile(paths["frames"] / "images" / "frame_00003.png") is not copy
+    assert mask.samefile(paths["labels"] / "masks" / "00003.npy") is not copy
+    np.testing.assert_array_equal(np.load(mask), np.load(paths["labels"] / "masks" / "00003.npy"))
+
+
 def test_truth_transforms_file_as_poses(tmp_path):
     paths = make_stage_outputs(tmp_path)
     ds = assemble_scene(AssembleConfig(frames=paths["frames"], poses=paths["poses"] / "transforms.json",
