@@ -99,13 +99,15 @@ class _Selection:
     """Frames identical to the frame before them in the source."""
     last_whole: int = -1
     """Position of the last frame that decoded whole."""
+    overran: bool = False
+    """The source held a frame past the windows' end (a video holding more frames than its header declares)."""
 
 
 def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: FramesConfig,
-            image_dirs: dict[int, Path], width: int, warn: bool = True) -> _Selection:
+            image_dirs: dict[int, Path], width: int, warn_from: float = 0) -> _Selection:
     """One streaming pass: every source frame decoded once and scored; the best frame of the current window held
     in memory until the window closes, then written (the folders are emptied first: a pass may be repeated, then
-    without ``warn``: its warnings were given)."""
+    warning only of the frames from position ``warn_from`` on: the others' warnings were given)."""
     for d in image_dirs.values():
         if d.exists():
             shutil.rmtree(d)
@@ -133,10 +135,12 @@ def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: Fram
     # the frame before, to tell a repeated frame: compared pixel for pixel, which stops at the first difference
     # (a hash of every frame cost 50 ms a 4K frame)
     previous: np.ndarray | None = None
-    with tqdm(total=source.n_declared, desc="frames", unit="frame", disable=not cfg.progress) as bar:
+    with tqdm(total=rule.n_total, desc="frames", unit="frame", disable=not cfg.progress) as bar:
         for frame in source:
             if frame.position >= rule.n_total:  # more frames than the container declared (or a replanned pass)
+                picked.overran = True
                 break
+            warn = frame.position >= warn_from
             picked.n_read += 1
             bar.update()
             if isinstance(frame, DroppedFrame):
@@ -196,11 +200,22 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
         _warn(f"{source.path}: left out {skipped_summary(skipped)}, which are not images this stage reads "
               f"({', '.join(IMAGE_SUFFIXES)}); {CONVERT_FIX}")
     width = name_width(source)
-    n_total = rule.n_total  # the source's length, as declared (a truncated video's windows are cut again)
+    # the source's length as declared (counted when a video holds more; a truncated video's windows are cut again)
+    n_total = rule.n_total
 
     with atomic_dir(cfg.out_dir, "frames", inputs=[cfg.source], legacy=["frames.json"]) as out:
         image_dirs = {1: out / "images", **{f: out / f"images_{f}" for f in cfg.downscale}}
         picked = _select(source, rule, cfg, image_dirs, width)
+        if picked.overran and isinstance(source, VideoSource):
+            # the header declares fewer frames than the video holds (its length estimated from a duration and a
+            # frame rate, or written wrong): count them and cut the windows again over all of them, rather than
+            # leave the rest of the video out unsaid
+            n_total = max(source.count_frames(), n_total + 1)
+            _warn(f"{source.path}: the video holds {n_total} frames, more than the {source.n_declared} its header "
+                  f"declares; choosing the frames again over all {n_total}")
+            rule = WindowRule.from_options(n_total, cfg.count, cfg.stride)
+            width = max(width, len(str(n_total - 1)))
+            picked = _select(source, rule, cfg, image_dirs, width, warn_from=source.n_declared)
         whole = picked.last_whole + 1
         if picked.n_read < n_total and cfg.accept_truncated and cfg.count is not None \
                 and len(picked.rows) < min(cfg.count, whole):
@@ -210,7 +225,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
                   f"choosing the {cfg.count} frames again over the first {whole}")
             rule = WindowRule.from_options(whole, cfg.count, None, of_declared=n_total)
             first = picked
-            picked = _select(source, rule, cfg, image_dirs, width, warn=False)
+            picked = _select(source, rule, cfg, image_dirs, width, warn_from=math.inf)
             picked.dropped += [d for d in first.dropped if d.position >= whole]
             picked.sharpness, picked.n_read = first.sharpness, first.n_read
         rows, dropped, all_sharpness, size, n_read = (picked.rows, picked.dropped, picked.sharpness, picked.size,
@@ -249,7 +264,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "source": str(Path(cfg.source).resolve()),
             "source_kind": source.kind,
             "fps": None if math.isnan(source.fps) else source.fps,
-            "source_frame_count": n_total,
+            "source_frame_count": source.n_declared,
             # an image folder's frames are the numbers in its names (IMG_4501 ...), not 0..count-1 as a video's
             "source_indices": list(source.indices) if source.kind == "images" else None,
             "decoded_frame_count": n_read,

@@ -115,13 +115,13 @@ class VideoSource:
         declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
         capture.release()
         # some streams do not declare a length: count by grabbing (no decoding) so windows can be planned
-        self.n_declared = declared if declared > 0 else self._count_frames()
+        self.n_declared = declared if declared > 0 else self.count_frames()
         if self.n_declared <= 0:
             raise FrameSourceError(self.path, "the video holds no frames that OpenCV can read", REENCODE_FIX)
 
-    def _count_frames(self) -> int:
-        """Frames of a stream that declares no length; what FFmpeg prints meanwhile joins ``self.remarks``
-        (the frames it is about are told apart when they are decoded)."""
+    def count_frames(self) -> int:
+        """Frames of a stream that declares no length, or more than it declares; what FFmpeg prints meanwhile
+        joins ``self.remarks`` (the frames it is about are told apart when they are decoded)."""
 
         def count() -> int:
             capture = cv2.VideoCapture(str(self.path))

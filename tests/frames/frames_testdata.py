@@ -39,6 +39,17 @@ def write_video(path: Path, frames: list[np.ndarray], fourcc: str = "mp4v", fps:
     return path
 
 
+def avi_declaring(avi: bytes, n_frames: int) -> bytes:
+    """An AVI file's bytes whose headers declare ``n_frames`` (the main header's total frames, the stream header's
+    length) whatever it holds: a header written wrong, or a length estimated from a duration and a frame rate."""
+    data = bytearray(avi)
+    main = data.find(b"avih") + 8  # dwMicroSecPerFrame, dwMaxBytesPerSec, dwPaddingGranularity, dwFlags, dwTotalFrames
+    data[main + 16:main + 20] = n_frames.to_bytes(4, "little")
+    stream = data.find(b"strh") + 8  # fccType, fccHandler, dwFlags, wPriority, wLanguage, dwInitialFrames, dwScale,
+    data[stream + 32:stream + 36] = n_frames.to_bytes(4, "little")  # dwRate, dwStart, dwLength
+    return bytes(data)
+
+
 # stride 5 over 20 frames: windows [0-4], [5-9], [10-14], [15-19]; one sharp frame in each, not at a window edge
 SHARP = {3, 6, 12, 19}
 

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from frames_testdata import FPS, HEIGHT, SHARP, WIDTH, make_frames, textured_frame, write_video
+from frames_testdata import FPS, HEIGHT, SHARP, WIDTH, avi_declaring, make_frames, textured_frame, write_video
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -191,6 +191,25 @@ def test_truncated_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert dropped["source_index"].tolist() == [last] and "FFmpeg reported damaged data" in dropped["problem"][0]
     assert f"cut.avi: frame {last}" in err and "dropped" in err
     assert read_table(out)["source_index"].tolist() == list(range(last))
+
+
+def test_a_video_holding_more_frames_than_it_declares_is_read_to_its_end(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # 20 frames whose headers declare 10: the frames after the tenth were left out unsaid
+    whole = write_video(tmp_path / "whole.avi", make_frames(20, SHARP), fourcc="MJPG")
+    short = tmp_path / "short.avi"
+    short.write_bytes(avi_declaring(whole.read_bytes(), 10))
+    assert cv2.VideoCapture(str(short)).get(cv2.CAP_PROP_FRAME_COUNT) == 10
+    out = tmp_path / "every"
+    code, err = run_cli(capsys, "--video", str(short), "--out", str(out))
+    assert code == 0 and "short.avi: the video holds 20 frames, more than the 10 its header declares" in err
+    assert read_table(out)["source_index"].tolist() == list(range(20))
+    meta = json.loads((out / "frames.json").read_text())
+    assert (meta["source_frame_count"], meta["decoded_frame_count"], meta["truncated"]) == (10, 20, False)
+    # --count cuts its windows over all 20: [0-4], [5-9], [10-14], [15-19], the sharp frame of each
+    out = tmp_path / "four"
+    code, err = run_cli(capsys, "--video", str(short), "--out", str(out), "--count", "4")
+    assert code == 0 and read_table(out)["source_index"].tolist() == sorted(SHARP)
 
 
 def test_bad_options(tmp_path: Path, blur_video: Path, capsys: pytest.CaptureFixture[str]) -> None:
