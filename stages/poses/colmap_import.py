@@ -296,8 +296,10 @@ def _frames_source_kind(frames_dir: Path) -> str | None:
 
 
 def _folder_images(images_dir: Path) -> list[str]:
-    """Image files directly in ``images_dir`` (not below: a folder may hold downscaled copies in images_2/)."""
-    return sorted(p.name for p in images_dir.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    """Image files directly in ``images_dir`` (not below: a folder may hold downscaled copies in images_2/); hidden
+    files (macOS's ``._`` copies) left out, as the frames stage leaves them out."""
+    return sorted(p.name for p in images_dir.iterdir()
+                  if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
 
 
 def import_model(cfg: ImportConfig) -> dict[str, Any]:

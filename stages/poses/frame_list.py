@@ -32,7 +32,10 @@ def read_frame_list(frames_dir: Path) -> FrameList:
     if not frames_dir.is_dir():
         raise InputError(frames_dir, "frames folder not found", "run `livescene frames` first or fix the path")
     image_dir = frames_dir / "images" if (frames_dir / "images").is_dir() else frames_dir
-    names = sorted(p.name for p in image_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    # hidden files are no frames, as in the frames stage: macOS leaves ``._IMG_0001.jpg`` (its metadata) beside every
+    # photo it copies to a foreign disk, named like the photo
+    names = sorted(p.name for p in image_dir.iterdir()
+                   if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file() and not p.name.startswith("."))
     if not names:
         others = sorted({p.suffix.lower() for p in image_dir.iterdir() if p.is_file() and p.suffix})
         raise InputError(image_dir, f"no images ({', '.join(IMAGE_SUFFIXES)}) found"

@@ -54,3 +54,13 @@ def test_a_folder_of_webp_names_the_frames_stage(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"no images .* found; it holds \.webp files.*the frames stage also reads "
                                          r"\.webp"):
         read_frame_list(folder)
+
+
+def test_macos_metadata_copies_are_no_frames(tmp_path: Path) -> None:
+    # macOS writes ``._NAME`` (AppleDouble metadata, not an image) beside each photo it copies to a foreign disk
+    folder = photos(tmp_path / "shots", [f"IMG_{k:04d}.JPG" for k in range(3)])
+    for k in range(3):
+        (folder / f"._IMG_{k:04d}.JPG").write_bytes(b"\x00\x05\x16\x07" + bytes(4000))
+    frames = read_frame_list(folder)
+    assert frames.names == ["IMG_0000.JPG", "IMG_0001.JPG", "IMG_0002.JPG"]
+    assert frames.source_index == {"IMG_0000.JPG": 0, "IMG_0001.JPG": 1, "IMG_0002.JPG": 2}
