@@ -24,7 +24,7 @@ from stages.scene import frame_number_of
 
 from .errors import FrameSourceError
 from .folder_numbering import check_numbering, natural_key
-from .integrity import DecoderReport, StderrCapture, decode_image
+from .integrity import JPEG_MAGIC, PNG_MAGIC, DecoderReport, StderrCapture, decode_image
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 REENCODE = ("re-encode it (`ffmpeg -i VIDEO -c:v libx264 -pix_fmt yuv420p fixed.mp4`) or extract its frames into an "
@@ -93,6 +93,13 @@ class VideoSource:
         if self.path.stat().st_size == 0:
             raise FrameSourceError(self.path, "the video file is empty (0 bytes)",
                                    "copy the video again from the recording device")
+        with self.path.open("rb") as handle:
+            head = handle.read(len(PNG_MAGIC))
+        still = "JPEG" if head.startswith(JPEG_MAGIC) else "PNG" if head.startswith(PNG_MAGIC) else None
+        if still:  # FFmpeg opens a photo as a video of one frame, which no later stage can use
+            raise FrameSourceError(self.path, f"the file is a {still} photo, not a video (whatever its name says)",
+                                   "pass the video file itself, or put the photos of the capture in a folder and pass "
+                                   "that folder as --video")
         with StderrCapture() as stderr:
             capture, text = stderr.call(lambda: cv2.VideoCapture(str(self.path)))
         said = DecoderReport.from_text(text)

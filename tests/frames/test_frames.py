@@ -159,6 +159,12 @@ def test_missing_empty_and_garbage_videos(tmp_path: Path, capsys: pytest.Capture
     garbage.write_bytes(b"this is not a video" * 50)
     code, err = run_cli(capsys, "--video", str(garbage), "--out", str(out))
     assert code == 2 and "garbage.mp4: OpenCV cannot open it as a video" in err and "ffmpeg" in err
+    for ext in (".jpg", ".png"):  # a photo named as a video: FFmpeg opens it as a video of one frame
+        photo = tmp_path / f"photo{ext}.mp4"
+        photo.write_bytes(cv2.imencode(ext, textured_frame(0))[1].tobytes())
+        code, err = run_cli(capsys, "--video", str(photo), "--out", str(out))
+        kind = "JPEG" if ext == ".jpg" else "PNG"
+        assert code == 2 and f"photo{ext}.mp4: the file is a {kind} photo, not a video" in err and "folder" in err
     no_frames = write_video(tmp_path / "no_frames.avi", [], fourcc="MJPG")  # a valid container, zero frames
     code, err = run_cli(capsys, "--video", str(no_frames), "--out", str(out))
     assert code == 2 and "no_frames.avi: the video holds no frames" in err
