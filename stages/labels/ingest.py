@@ -30,6 +30,7 @@ from stages.scene import atomic_dir, label_map_to_onehot, write_json, write_mask
 from stages.scene.dataset import names_read_alike
 from stages.scene.masks import UNRELIABLE_DIVISOR, USUAL_QUANTILE, USUAL_SHARE, unreliable_masks
 
+from . import mask_checks as checks
 from .coco_labels import read_coco_labels
 from .errors import LabelError
 from .frame_set import read_frame_set
@@ -193,6 +194,12 @@ def ingest_labels(config: LabelsConfig) -> dict:
     overlaps: dict[str, int] = {}
     src_sizes: set[tuple[int, int]] = set()
     annotated: dict[str, np.ndarray] = {}
+    position = {f: i for i, f in enumerate(frames.frame_ids)}
+    previous: tuple[str, np.ndarray] | None = None  # the last annotated frame, for the tracker checks
+    neighbours: list[tuple[str, str]] = []  # annotated frames next to each other in FRAMES
+    warnings: list[dict] = []  # docs/labels-states.md, "Tracker failures"
+    anti_aliased: dict[str, float] = {}
+    at_border: dict[str, set[str]] = {}
 
     def record(fid: str, labels: np.ndarray) -> None:
         pixels = np.bincount(labels.ravel(), minlength=len(names) + 1)[1:]
@@ -218,11 +225,29 @@ def ingest_labels(config: LabelsConfig) -> dict:
             labels = resize_labels(label_map.labels, (h, w), entry.source).astype(np.int64)
             write_mask(tmp, fid, label_map_to_onehot(labels - 1, len(names)))
             record(fid, labels)
+            if previous is not None and position[fid] == position[previous[0]] + 1:
+                neighbours.append((previous[0], fid))
+                overlaps_then = checks.overlap_counts(previous[1], labels, len(names))
+                warnings.extend(checks.identity_switches(previous[0], fid, overlaps_then, names, min_pixels))
+            previous = (fid, labels)
+            at_border[fid] = checks.border_objects(labels, names)
+            if label_set.format == "png":  # an id map's values: anti-aliasing makes ids between ids on edges
+                between, edges = checks.between_id_edges(labels)
+                if edges and between >= checks.BETWEEN_SHARE * edges:
+                    anti_aliased[fid] = round(between / edges, 3)
             if propagate:
                 annotated[fid] = labels.astype(np.uint16)
             if label_map.overlap_pixels:
                 overlaps[fid] = label_map.overlap_pixels
         write_yaml(tmp / "mapping.yaml", {k + 1: n for k, n in enumerate(names)})
+        pixels = {f: per_frame[f]["pixels"] for f in order}
+        usual = {n: float(np.quantile(seen, USUAL_QUANTILE)) if (seen := [p[n] for p in pixels.values() if p[n]])
+                 else 0.0 for n in names}  # the unreliable rule's usual size, over the annotated frames
+        warnings.extend(checks.sudden_changes(neighbours, pixels, at_border, names, min_pixels, usual, USUAL_SHARE))
+        warnings.sort(key=lambda w: (position[w["frame"]], w["kind"], names.index(w["object"])))
+        if anti_aliased:
+            warnings.append({"kind": "anti_aliased", "frames": list(anti_aliased),
+                             "share": max(anti_aliased.values())})
         summary = {
             "format": label_set.format,
             "input": str(config.input),
@@ -244,6 +269,8 @@ def ingest_labels(config: LabelsConfig) -> dict:
             "labels_without_frame": unmatched,
             "frames": per_frame,
         }
+        if warnings:  # written only when a check found something: clean masks give the same labels.json as before
+            summary["mask_warnings"] = warnings
         if propagate:
             result = propagate_missing(tmp, frames, annotated, names, progress=config.progress,
                                        on_frame=lambda fid, lab: record(fid, lab.astype(np.int64)))
@@ -265,6 +292,13 @@ def ingest_labels(config: LabelsConfig) -> dict:
             })
             write_json(tmp / "propagation.json", result.report)
         write_json(tmp / "labels.json", summary)
+    if warnings:
+        print(f"{config.input}: {len(warnings)} warning(s) about the masks ({config.out / 'labels.json'}, "
+              "mask_warnings; docs/labels-states.md, \"Tracker failures\"):", file=sys.stderr)
+        for w in warnings[:10]:
+            print(f"  {checks.warning_line(w)}", file=sys.stderr)
+        if len(warnings) > 10:
+            print(f"  ... and {len(warnings) - 10} more", file=sys.stderr)
     unseen = [n for n in names if not any(per_frame[f]["pixels"][n] for f in per_frame)]
     if unseen:  # the mask ids or the name table do not match, or the object never shows
         print(f"{config.input}: no mask shows {unseen} in any frame: {'it' if len(unseen) == 1 else 'they'} cannot be "

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from html import escape
 
+from stages.labels.mask_checks import warning_line
+
 from .html_parts import fmt, missing, table
 from .scene_data import SceneData, csv_number, read_csv_rows, read_json
 from .svg_plot import Series, line_plot_svg
@@ -53,6 +55,12 @@ def section_labels(sd: SceneData, skipped: str = "the labels rule did not run fo
     head = (f"<p>{n_labelled} of {n_frames} frames annotated ({escape(str(labels.get('format', '?')))}, objects "
             f"{escape(', '.join(objects))}); {len(labels.get('unreliable_frames') or {})} frames with an object under "
             f"H*W/300 pixels and a quarter of its median size (their mask loss is skipped).</p>")
+    warnings = labels.get("mask_warnings") or []
+    if warnings:  # docs/labels-states.md, "Tracker failures"
+        items = "".join(f"<li>{escape(warning_line(w))}</li>" for w in warnings[:20])
+        more = f"<li>... and {len(warnings) - 20} more (labels.json, mask_warnings)</li>" if len(warnings) > 20 else ""
+        head += (f"<p class=\"note\">{len(warnings)} warning(s) about the masks, the marks of a tracker's failure "
+                 f"(check these frames; the stage used the masks as given):</p><ul>{items}{more}</ul>")
     report = read_json(folder / "propagation.json")
     if report is None:
         without = labels.get("frames_without_masks") or []
