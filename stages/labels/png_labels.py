@@ -63,13 +63,31 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
         values = _values(img)
         unknown = [int(v) for v in values if not known[int(v)]]
         if unknown:
-            raise LabelError(path, f"pixel values {unknown} are no id of {table.path}",
+            shown = f"{unknown}" if len(unknown) <= 10 else f"{unknown[:10]} and {len(unknown) - 10} more"
+            if _between_neighbours(img, known):
+                raise LabelError(path, f"pixel values {shown} are no id of {table.path}, and most of their pixels lie "
+                                 "on edges between a smaller and a larger value: the id map has anti-aliased edges "
+                                 "or was resized with interpolation",
+                                 "export the id maps without anti-aliasing (resize them nearest-neighbour); known ids "
+                                 f"{list(table.ids)}")
+            raise LabelError(path, f"pixel values {shown} are no id of {table.path}",
                              f"add them to the name table or relabel those pixels (known ids {list(table.ids)})")
         if img.dtype == np.uint8:  # OpenCV's table lookup: a tenth of numpy's indexing on a 4K mask
             return LabelMap(cv2.LUT(np.ascontiguousarray(img), lut[:256]))
         return LabelMap(lut[img].astype(np.uint16))
 
     return load
+
+
+def _between_neighbours(img: np.ndarray, known: np.ndarray) -> bool:
+    """True when at least half of the pixels of unknown value lie between a smaller and a larger value of their 3x3
+    window: the ribbons an anti-aliased or interpolated id map has along its edges (docs/labels-states.md)."""
+    values = img.astype(np.float32)
+    kernel = np.ones((3, 3), np.uint8)
+    low = cv2.erode(values, kernel, borderType=cv2.BORDER_REPLICATE)
+    high = cv2.dilate(values, kernel, borderType=cv2.BORDER_REPLICATE)
+    stray = ~known[img]
+    return bool(np.count_nonzero(stray & (low < values) & (high > values)) >= 0.5 * np.count_nonzero(stray))
 
 
 def _values(img: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 from labelset_writers import HEIGHT, WIDTH, write_frames
 
 from stages.labels import LabelsConfig, ingest_labels
@@ -172,3 +173,37 @@ def test_the_report_lists_the_warnings(tmp_path: Path) -> None:
     assert "frame 00008: drawer&#x27;s mask lies on door&#x27;s pixels of frame 00006" in page
     (tmp_path / "b").mkdir()
     assert "warning" not in html(_ingest(tmp_path / "b", [_frame(t) for t in range(N)])[0], tmp_path / "b")
+
+
+def test_anti_aliased_values_that_are_no_id_are_refused_as_such(tmp_path: Path) -> None:
+    """Ids 80 and 160: a square of 160 whose 1 px ring was anti-aliased to 120 (no id; each ring pixel between a 0
+    and a 160 of its window) is refused as anti-aliased; with a 10 x 10 square of the unknown value 200 too, only 84 of
+    the 184 pixels of unknown value lie between two values (under half): refused as ids missing from the name table."""
+    from stages.labels import LabelError
+
+    lab = np.zeros((HEIGHT, WIDTH), np.uint8)
+    lab[9:31, 9:31] = 120
+    lab[10:30, 10:30] = 160
+    lab[35:45, 40:50] = 80
+    for name, image, message in (
+        ("aa", lab, r"pixel values \[120\] are no id of .*anti-aliased edges.*fix: export the id maps without"),
+        (
+            "id",
+            np.where(lab == 80, 200, lab).astype(np.uint8),
+            r"pixel values \[120, 200\] are no id of [^,]*; fix: add",
+        ),
+    ):
+        folder = tmp_path / name / "masks"
+        folder.mkdir(parents=True)
+        cv2.imwrite(str(folder / "frame_00000.png"), image)
+        (tmp_path / name / "mapping.yaml").write_text("80: door\n160: drawer\n")
+        with pytest.raises(LabelError, match=message):
+            ingest_labels(
+                LabelsConfig(
+                    input=folder,
+                    frames=write_frames(tmp_path / name, 1),
+                    out=tmp_path / name / "labels",
+                    progress=False,
+                )
+            )
+        assert not (tmp_path / name / "labels").exists()
