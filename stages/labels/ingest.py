@@ -26,7 +26,7 @@ from typing import Literal
 import numpy as np
 from tqdm import tqdm
 
-from stages.scene import atomic_dir, label_map_to_onehot, write_json, write_mask, write_yaml
+from stages.scene import atomic_dir, frame_number_of, label_map_to_onehot, write_json, write_mask, write_yaml
 from stages.scene.dataset import names_read_alike
 from stages.scene.masks import UNRELIABLE_DIVISOR, USUAL_QUANTILE, USUAL_SHARE, unreliable_masks
 
@@ -148,6 +148,16 @@ def open_label_set(config: LabelsConfig) -> LabelSet:
     raise LabelError(config.input, f"unknown format {fmt!r}", "use auto, npy, png, coco, labelme or objects")
 
 
+def _numbered_one_late(label_set: LabelSet, frames) -> str | None:
+    """A note when every label file names a frame once its number is read one less (masks numbered from 1, as
+    ffmpeg's image2 writes frames, against frames numbered from 0): each mask then lies on the frame after its own."""
+    numbers = [frame_number_of(e.label_id) for e in label_set.entries]
+    if not numbers or not all(n is not None and n >= 1 and frames.match(str(n - 1)) is not None for n in numbers):
+        return None
+    return ("Every label file matches a frame when its number is read one less: were the masks numbered from 1 while "
+            "the frames start at 0? Then each mask is used on the frame after its own; renumber the masks from 0")
+
+
 def ingest_labels(config: LabelsConfig) -> dict:
     """Ingest, write LABELS atomically and return the labels.json summary."""
     frames = read_frame_set(config.frames)
@@ -172,8 +182,10 @@ def ingest_labels(config: LabelsConfig) -> dict:
         matched[fid] = entry.source
     if unmatched and matched:  # recorded in labels.json too; said here because a typo in a name looks the same
         shown = ", ".join(unmatched[:3]) + (", ..." if len(unmatched) > 3 else "")
+        late = _numbered_one_late(label_set, frames)
         print(f"{config.input}: {len(unmatched)} label file(s) match no extracted frame of {frames.root} and are left "
-              f"out ({shown}); names must end in a frame's source index", file=sys.stderr)
+              f"out ({shown}); names must end in a frame's source index"
+              + (f". {late}" if late else ""), file=sys.stderr)
     if not matched:
         raise LabelError(config.input, f"none of the {len(label_set.entries)} labelled frames matches a frame of "
                          f"{frames.root} (ids like {frames.frame_ids[:3]})",

@@ -207,3 +207,26 @@ def test_anti_aliased_values_that_are_no_id_are_refused_as_such(tmp_path: Path) 
                 )
             )
         assert not (tmp_path / name / "labels").exists()
+
+
+def test_masks_numbered_from_1_are_said_to_be_one_late(tmp_path: Path, capsys) -> None:
+    """Frames 0..3 and masks frame_00001..frame_00004 (frame t's mask numbered t + 1): frame_00004 matches no frame,
+    and every mask's number less one is a frame, so stderr asks whether the masks were numbered from 1. Masks 0..3
+    and 0..4 (one beyond the frames, but a mask numbered 0) get no such note."""
+    frames = tmp_path / "frames"
+    (frames / "images").mkdir(parents=True)
+    rows = ["frame,source_index,timestamp,sharpness"]
+    for i in range(4):
+        cv2.imwrite(str(frames / "images" / f"frame_{i:05d}.png"), np.full((HEIGHT, WIDTH, 3), 40 * i, np.uint8))
+        rows.append(f"frame_{i:05d}.png,{i},{0.1 * i},1.0")
+    (frames / "frames.csv").write_text("\n".join(rows) + "\n")
+    for name, numbers, late in (("late", range(1, 5), True), ("extra", range(0, 5), False)):
+        folder = tmp_path / name / "masks"
+        folder.mkdir(parents=True)
+        for i in numbers:
+            cv2.imwrite(str(folder / f"frame_{i:05d}.png"), _frame(i))
+        (tmp_path / name / "mapping.yaml").write_text(f"{DOOR}: door\n{DRAWER}: drawer\n")
+        ingest_labels(LabelsConfig(input=folder, frames=frames, out=tmp_path / name / "labels", progress=False))
+        err = capsys.readouterr().err
+        assert "1 label file(s) match no extracted frame" in err and "frame_00004.png" in err
+        assert ("were the masks numbered from 1 while the frames start at 0?" in err) is late, name
