@@ -157,11 +157,14 @@ def orient_dataset(src: str | Path, out: str | Path, points: str | Path | None =
         turned_cloud = o3d.geometry.PointCloud(cloud)
         turned_cloud.transform(m)
     meta = dict(ds.meta)
-    if orient.turned:
+    if turned_cloud is not None and (orient.turned or box is None):
+        # turned: the given box no longer fits the room; kept without a box of its own (a published set rendered
+        # upright): the points give one, where the box around the cameras alone leaves out the walls they face
         centres = np.stack([f.c2w[:3, 3] for f in frames])
         box, box_info = scene_box(turned_cloud, centres)
-        meta.update(box_info, scene_box_rule="open3d statistical outlier removal on the turned points, grown to "
-                                             "include the camera centres")
+        meta.update(box_info, scene_box_rule="open3d statistical outlier removal on the "
+                                             f"{'turned ' if orient.turned else ''}points, grown to include the "
+                                             "camera centres")
     meta["orientation"] = orient.as_dict(src)
     new = replace(ds, frames=frames, scene_box=box, meta=meta, nerfstudio=nerfstudio)
 

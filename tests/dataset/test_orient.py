@@ -92,6 +92,29 @@ def test_an_upright_dataset_keeps_its_world(tiny_dataset: SceneDataset, tmp_path
         assert np.array_equal(new.c2w, old.c2w)
 
 
+def test_an_upright_dataset_without_a_box_gets_the_box_of_its_points(tiny_dataset: SceneDataset,
+                                                                    tmp_path: Path) -> None:
+    """A published set (rendered upright, no scene.json) keeps its world but not the box around its cameras alone,
+    which leaves out the walls the cameras face: the box holds the points (the 5 x 4 x 2.6 room, turned a quarter
+    about z: x within 2.0, y within 2.5, z within 1.3 of the centre) and the cameras."""
+    quarter = Rotation.from_euler("z", 90.0, degrees=True).as_matrix()
+    src = _ready_dataset(tiny_dataset, quarter, np.zeros(3))
+    assert read_scene(src).scene_box is None
+    ds, how = orient_dataset(src, tmp_path / "oriented")
+    assert not how.turned
+    centres = np.stack([f.c2w[:3, 3] for f in ds.frames])
+    room = np.array([2.0, 2.5, 1.3])
+    np.testing.assert_allclose(ds.scene_box[0], np.minimum(-room, centres.min(0)), atol=0.05)
+    np.testing.assert_allclose(ds.scene_box[1], np.maximum(room, centres.max(0)), atol=0.05)
+    assert "points, grown to include the camera centres" in ds.meta["scene_box_rule"]
+
+    given = read_scene(src)  # a box the dataset brings is kept where its world is
+    given.scene_box = np.array([[-9.0, -9.0, -9.0], [9.0, 9.0, 9.0]])
+    write_scene(given, src)
+    ds, how = orient_dataset(src, tmp_path / "oriented-own-box")
+    assert not how.turned and np.array_equal(ds.scene_box, given.scene_box)
+
+
 def test_without_points_the_world_is_kept_with_the_reason(tiny_dataset: SceneDataset, tmp_path: Path) -> None:
     tilt = Rotation.from_euler("x", 30.0, degrees=True).as_matrix()
     src = _ready_dataset(tiny_dataset, tilt, np.zeros(3), with_points=False)
