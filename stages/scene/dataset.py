@@ -33,7 +33,7 @@ from .atomic_io import write_json, write_yaml
 from .camera import Camera
 from .errors import SceneError
 from .keyframes import frame_id_of, frame_number_of, read_key_frames, write_key_frames
-from .masks import mask_path, read_mask
+from .masks import mask_path, missing_mask_fix, read_mask
 from .splits import reference_split
 from .transforms import (
     camera_from_dict,
@@ -485,9 +485,10 @@ def validate_scene(ds: SceneDataset, *, deep: bool = False) -> None:
             if not path.is_file():
                 if f.frame_id in unlabeled:
                     continue
-                raise SceneError(path, f"frame {f.file_path} has no mask",
-                                 "ingest masks for every frame with `livescene labels`, or list the frame "
-                                 "under frames_without_masks in scene.json")
+                problem, fix = missing_mask_fix(ds.root, f.frame_id, "ingest masks for every frame with `livescene "
+                                                "labels`, or list the frame under frames_without_masks in scene.json")
+                raise SceneError(path, f"frame {f.file_path} has no mask" + problem.removeprefix("mask file not found"),
+                                 fix)
             cam = ds.camera_of(f)
             try:
                 arr = np.load(path, mmap_mode="r", allow_pickle=False)

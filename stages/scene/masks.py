@@ -19,6 +19,10 @@ def check_mask_array(mask: np.ndarray, path: Path, height: int, width: int, n_ob
     if mask.ndim != 3:
         raise SceneError(path, f"mask has {mask.ndim} dimensions, expected H x W x (objects + 1) = {expected}",
                          "re-export the masks with one channel per object plus a background channel")
+    if mask.shape[2] != n_objects + 1 and mask.shape == (n_objects + 1, height, width):
+        raise SceneError(path, f"mask is {mask.shape[0]} x {height} x {width}: channels first, where the layout is "
+                         f"H x W x (objects + 1) = {expected}", "move the channel axis last: "
+                         "np.save(path, np.moveaxis(np.load(path), 0, -1))")
     if mask.shape[2] != n_objects + 1:
         raise SceneError(path, f"mask has {mask.shape[2]} channels but mapping.yaml names {n_objects} objects "
                          f"({n_objects + 1} expected with background last)",
@@ -28,10 +32,33 @@ def check_mask_array(mask: np.ndarray, path: Path, height: int, width: int, n_ob
                          "resize the masks to the image size with `livescene labels` (integer factors only)")
 
 
+def misnamed_mask(root: Path, frame_id: str) -> Path | None:
+    """A mask file named by the frame's number but not by its id (``masks/12.npy`` for the image ``den_00012``):
+    masks are found by id, so a download whose masks are padded otherwise than its images reads as masks missing."""
+    if not frame_id.isdigit():
+        return None
+    for path in sorted((Path(root) / "masks").glob("*.npy")):
+        if path.stem != frame_id and path.stem.isdigit() and int(path.stem) == int(frame_id):
+            return path
+    return None
+
+
+def missing_mask_fix(root: Path, frame_id: str, fix: str) -> tuple[str, str]:
+    """(problem, fix) for a frame whose ``masks/<id>.npy`` is missing: a mask of its number named otherwise is
+    named, with the rename as the fix; else ``fix``."""
+    other = misnamed_mask(root, frame_id)
+    if other is None:
+        return "mask file not found", fix
+    return (f"mask file not found, but {other.name} carries the frame's number (masks are named by the frame id, "
+            "the last '_' token of the image name, zeros included)",
+            f"rename the masks after the images' ids: {other.name} -> {frame_id}.npy")
+
+
 def read_mask(root: Path, frame_id: str, height: int, width: int, n_objects: int) -> np.ndarray:
     path = mask_path(root, frame_id)
     if not path.is_file():
-        raise SceneError(path, "mask file not found", "ingest masks for every frame with `livescene labels`")
+        problem, fix = missing_mask_fix(root, frame_id, "ingest masks for every frame with `livescene labels`")
+        raise SceneError(path, problem, fix)
     try:
         mask = np.load(path, allow_pickle=False)
     except (ValueError, OSError) as exc:

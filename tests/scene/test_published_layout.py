@@ -131,3 +131,28 @@ def test_the_truth_is_not_compared_with_a_run_on_rescaled_key_values(tmp_path):
     assert rescaled._other_scale().startswith("skipped: the dataset's key values were mapped to [0, 1]")
     keys = {"frame_00000": {"object0": 0.0, "object1": 0.0}, "frame_00006": {"object0": 1.0, "object1": 1.0}}
     assert Evaluator(object(), read_scene(published(tmp_path / "unit", keys=keys)))._other_scale() is None
+
+
+def test_masks_as_downloads_save_them_are_read_or_refused_with_the_fix(tmp_path):
+    """uint8 0/1 masks read as the bool ones; channels first (C, H, W) and masks named by number but not by the
+    images' zero-padded id are refused, each naming the file and the fix (docs/data-contract.md)."""
+    root = published(tmp_path / "ds")
+    ds = read_scene(root)
+    frame = ds.frames[0]
+    path = root / "masks" / f"{frame.frame_id}.npy"
+    own = np.load(path)
+    assert own.shape == (18, 24, 3) and own.dtype == bool
+    np.save(path, own.astype(np.uint8))
+    assert np.array_equal(read_scene(root).load_mask(frame), own)
+
+    np.save(path, np.moveaxis(own, -1, 0))  # (3, 18, 24)
+    with pytest.raises(SceneError, match=r"3 x 18 x 24: channels first.*np\.moveaxis") as err:
+        read_scene(root)
+    assert str(path) in str(err.value)
+    np.save(path, own)
+
+    path.rename(root / "masks" / "0.npy")  # the image is frame_00000
+    with pytest.raises(SceneError, match=r"has no mask, but 0\.npy carries the frame's number.*0\.npy -> 00000\.npy"):
+        read_scene(root)
+    with pytest.raises(SceneError, match=r"0\.npy -> 00000\.npy"):
+        ds.load_mask(frame)
