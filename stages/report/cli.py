@@ -2,7 +2,8 @@
 
     livescene report sweep --run RUN --data DS --out DIR [--steps 5] [--scale 0.5]
     livescene report scene --scene NAME --inputs INPUTS.json --out PAGE.html [--index INDEX.html]
-    livescene report index --summaries S1.json S2.json [--earlier S3.json] --out INDEX.html
+    livescene report index --summaries S1.json S2.json [--earlier S3.json] --out INDEX.html [--csv VERDICTS.csv]
+                           [--digests DIGESTS.csv]
 
 INPUTS.json names the file or folder of each role the page reads (dataset, poses, runs per method, ...);
 the page reads nothing else. Format: docs/workflow.md, "The report".
@@ -56,6 +57,8 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
     i.add_argument("--out", required=True, help="index HTML to write")
     i.add_argument("--csv", default="", help="also write every scene's paired verdicts here (one row per scene, "
                    "baseline and metric)")
+    i.add_argument("--digests", default="", help="also write every scene's stage digests here (scene, stage, files, "
+                   "digest): diff two machines' files to see where their runs part")
     return parser
 
 
@@ -120,4 +123,9 @@ def _index(args: argparse.Namespace) -> int:
     if args.csv:
         write_text(Path(args.csv), verdicts_csv(verdict_rows(summaries)))
         print(args.csv)
+    if args.digests:
+        from .digests import digests_csv
+
+        write_text(Path(args.digests), digests_csv(summaries))
+        print(args.digests)
     return 0

@@ -25,7 +25,8 @@ SINGLE_ROLES = {
     "pose_error": "JSON of `livescene poses compare` (estimated poses against the truth)",
     "labels": "labels folder (labels.json, propagation.json, confidence.csv)",
     "states": "states folder (states.json, states.csv)",
-    "language": "language targets (listed for completeness: the page reads grounding from the evaluations)",
+    "language": "language targets (the page reads grounding from the evaluations; digested with the other stages)",
+    "exposure": "exposure.json of the scene's exposure measurement",
     "stability": "summary.json of `livescene stability`",
     "stability_benchmark": "benchmark TSV of the stability suite",
     "benchmarks": "folder of the scene's benchmark TSVs (one per job, named after it)",
@@ -54,6 +55,7 @@ class ReportInputs:
     labels: Path | None = None
     states: Path | None = None
     language: Path | None = None
+    exposure: Path | None = None
     stability: Path | None = None
     stability_benchmark: Path | None = None
     benchmarks: Path | None = None

@@ -16,6 +16,7 @@ from typing import Any
 
 from stages.scene import InputError
 
+from .digests import StageDigest, stage_digests
 from .inputs import ReportInputs
 
 
@@ -175,6 +176,8 @@ class SceneData:
     dataset_info: dict | None = None
     methods: list[MethodData] = field(default_factory=list)
     stability: dict | None = None
+    digests: list[StageDigest] = field(default_factory=list)
+    """Per stage output, the SHA-256 of its result files (digests.py): where two runs of the job part."""
 
     @property
     def data(self) -> Path | None:
@@ -273,4 +276,5 @@ def collect_scene(scene: str, inputs: ReportInputs, *, methods: list[str] | None
         shared = read_benchmark(inputs.stability_benchmark)
         if shared is not None:
             sd.benchmarks["stability"] = shared
+    sd.digests = stage_digests(inputs, [m.name for m in sd.methods])
     return sd

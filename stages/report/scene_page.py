@@ -40,6 +40,7 @@ SECTIONS = [
     ("commands", "Language commands"),
     ("export", "Export: meshes and point clouds"),
     ("stability", "Stability checks"),
+    ("digests", "Digests: where two runs part"),
 ]
 
 
@@ -654,6 +655,23 @@ def section_stability(sd: SceneData) -> str:
             + table(["case", "group", "result", "metric", "s"], rows))
 
 
+def section_digests(sd: SceneData) -> str:
+    """Each stage output's SHA-256 over its result files (digests.py): the first row that differs from another
+    run's page (or digests.csv) is the stage where the two runs part (docs/workflow.md, "Where two runs part")."""
+    if not sd.digests:
+        return missing("The report inputs name no stage output to digest.")
+    rows = [[escape(d.stage), d.files,
+             escape(d.left_out) or "–",
+             f"<code>{d.digest}</code>" if d.digest else f'<span class="fail">not found: {escape(str(d.path))}</span>']
+            for d in sd.digests]
+    return ("<p>SHA-256 of each stage's result files (first 12 hex digits), in pipeline order. The same job gives "
+            "the same digests on one machine; on another CPU the first row that differs is the stage where the two "
+            "runs part, and every stage after it differs too. Compare two machines' <code>digests.csv</code> "
+            "(beside the index) with <code>diff</code> (docs/workflow.md, \"Where two runs part\"). Left out: "
+            "hidden marker files, and what records time, machine, load or absolute paths.</p>"
+            + table(["stage", "files covered", "left out", "digest"], rows))
+
+
 def scene_summary(sd: SceneData, page: str) -> dict:
     """Headline numbers for the index page, with each run's trust flag and the paired verdict; ``page`` is the
     link from the index to the scene page."""
@@ -671,6 +689,7 @@ def scene_summary(sd: SceneData, page: str) -> dict:
             "verdict": [r.to_dict() for r in scene_verdict(sd, flags)],
             "skipped": [k for k, v in sd.plan.items() if not v.get("needed") and _of_scene(k, sd)],
             "job_seconds": round(_scene_seconds(sd), 1),
+            "digests": [d.to_dict() for d in sd.digests],
             # when the page was built: the index shows it for pages an earlier run left (summary only, not the page)
             "built": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
 
@@ -698,7 +717,8 @@ def build_scene_page(sd: SceneData, *, views: int = 3, index: str | None = None)
               "curves": section_curves(sd),
               "grid": section_grid(sd, views), "sliders": sliders, "relevancy": section_relevancy(sd),
               "unseen": section_unseen(sd), "locality": section_locality(sd),
-              "commands": section_commands(sd), "export": _section_export(sd), "stability": section_stability(sd)}
+              "commands": section_commands(sd), "export": _section_export(sd), "stability": section_stability(sd),
+              "digests": section_digests(sd)}
     body = head + nav + "".join(f'<section id="{k}"><h2>{escape(t)}</h2>{bodies[k]}</section>' for k, t in SECTIONS)
     script = SLIDER_SCRIPT % json.dumps(images) if images else ""
     return page(f"LiveScene report: {sd.scene}", body, script)
