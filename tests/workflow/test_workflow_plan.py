@@ -75,6 +75,11 @@ def test_the_demo_plan_and_commands_follow_its_row_and_the_config(demo_plan):
         "results/demo/pose_error.json")
     assert set(manifest["export"]) == set(manifest["sweep"]) == set(manifest["control"]) == {"livescene"}
     assert set(manifest["runs"]) == set(manifest["eval"]) == set(trained)
+    # every stage output the page digests (docs/workflow.md, "Where two runs part"), frames and exposure too
+    assert manifest["frames"] == "results/demo/frames" and manifest["exposure"] == "results/demo/exposure.json"
+    assert manifest["language"] == "results/demo/language/targets.npz"
+    (index,) = [text for rule, text in demo_plan.blocks() if rule == "report_index"]
+    assert " --csv reports/verdicts.csv --digests reports/digests.csv " in index.split("Shell command:", 1)[1]
 
 
 def test_stability_and_exports_left_out_by_the_config(workflow_copy):

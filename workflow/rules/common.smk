@@ -262,9 +262,9 @@ def report_scene_input(wildcards):
 
 # rule input name -> role of the report inputs manifest (docs/workflow.md, "The report"); per-method inputs
 # are named <prefix>_<method>
-REPORT_ROLES = {"dataset_data": "dataset", "truth": "truth", "capture": "capture", "poses": "poses",
-                "pose_error": "pose_error", "labels": "labels", "states": "states", "targets": "language",
-                "stability": "stability"}
+REPORT_ROLES = {"dataset_data": "dataset", "truth": "truth", "capture": "capture", "frames": "frames",
+                "poses": "poses", "pose_error": "pose_error", "labels": "labels", "states": "states",
+                "targets": "language", "exposure": "exposure", "stability": "stability"}
 REPORT_METHOD_ROLES = {"run": "runs", "eval": "eval", "sweep": "sweep", "control": "control",
                        "export": "export"}
 

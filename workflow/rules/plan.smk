@@ -183,6 +183,8 @@ def scene_outputs(scene):
     out = {}
     if needed(scene, "capture"):
         out["capture"] = capture_dir(scene)
+    if needed(scene, "frames"):
+        out["frames"] = R(scene, "frames")
     if needed(scene, "poses") or needed(scene, "poses_import"):
         out["poses"] = R(scene, "poses")
     if needed(scene, "pose_compare"):
@@ -194,6 +196,8 @@ def scene_outputs(scene):
     out.update({f"dataset_{k}": v for k, v in dataset_files(scene).items()})
     if needed(scene, "language_targets"):
         out["targets"] = R(scene, "language", "targets.npz")
+    if needed(scene, "exposure"):
+        out["exposure"] = R(scene, "exposure.json")
     for m in methods(scene):
         out[f"run_{m}"] = R(scene, "runs", m, "run.json")
         out[f"eval_{m}"] = R(scene, "eval", m)
@@ -209,11 +213,12 @@ def scene_outputs(scene):
 
 
 def all_targets():
-    """Final outputs: the index page (which pulls in every scene page and all it needs) and its verdicts.csv, and
-    every file the selected scenes' pages read: Snakemake remakes a missing intermediate only when a consumer has
-    to run, so a training killed on its own (a scheduler's SIGTERM, SIGKILL) left no run.json and a rerun said
-    "Nothing to be done" over the previous model's pages; named here, a missing one is remade (and what reads it)."""
-    outputs = [str(Path(REPORTS, "index.html")), str(Path(REPORTS, "verdicts.csv"))]
+    """Final outputs: the index page (which pulls in every scene page and all it needs), its verdicts.csv and
+    digests.csv, and every file the selected scenes' pages read: Snakemake remakes a missing intermediate only when
+    a consumer has to run, so a training killed on its own (a scheduler's SIGTERM, SIGKILL) left no run.json and a
+    rerun said "Nothing to be done" over the previous model's pages; named here, a missing one is remade (and what
+    reads it)."""
+    outputs = [str(Path(REPORTS, name)) for name in ("index.html", "verdicts.csv", "digests.csv")]
     for scene in SELECTED:
         outputs += [str(v) for v in scene_outputs(scene).values() if str(v) not in outputs]
     return outputs

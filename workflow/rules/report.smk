@@ -85,6 +85,13 @@ rule report_index:
             category="HTML report",
             labels={"page": "verdicts"},
         ),
+        # per scene and stage, the SHA-256 of the stage's result files: diff two machines' to see where they part
+        digests=report(
+            str(Path(REPORTS, "digests.csv")),
+            caption="../report/digests.rst",
+            category="HTML report",
+            labels={"page": "digests"},
+        ),
     log:
         str(Path(RESULTS, "logs", "report_index.log")),
     benchmark:
@@ -102,5 +109,5 @@ rule report_index:
         ENV
     shell:
         "{params.cli} report index --summaries {input.summaries:q} {params.earlier} {params.pending}"
-        " --out {output.index:q} --csv {output.csv:q} > {log:q} 2>&1"
+        " --out {output.index:q} --csv {output.csv:q} --digests {output.digests:q} > {log:q} 2>&1"
 
