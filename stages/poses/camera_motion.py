@@ -75,3 +75,12 @@ def feature_motion(database: Path) -> FeatureMotion:
         db.close()
     return FeatureMotion(n_pairs=len(medians), max_median_px=max(medians, default=0.0),
                          rotation_only_fraction=rotation_only / n_verified if n_verified else 0.0)
+
+
+def keypoint_counts(database: Path) -> list[int]:
+    """SIFT features kept per image (after the object masks), from a COLMAP database after extraction."""
+    db = pycolmap.Database.open(database)
+    try:
+        return [int(db.num_keypoints_for_image(image_id=image.image_id)) for image in db.read_all_images()]
+    finally:
+        db.close()

@@ -14,7 +14,7 @@ import pycolmap
 
 from stages.scene import atomic_dir, write_json
 
-from .camera_motion import FeatureMotion, feature_motion
+from .camera_motion import FeatureMotion, feature_motion, keypoint_counts
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
 from .frame_list import check_name_order, read_frame_list, time_order
@@ -26,6 +26,7 @@ from .quality_gate import (
     check_registration,
     check_trajectory,
     compact_names,
+    feature_shortage,
     intrinsics_warnings,
     registration_advice,
     too_few_frames_advice,
@@ -70,9 +71,11 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
                          "refused after structure from motion")
         print(f"warning: {warnings_[-1]}", file=sys.stderr)  # now, so that a user can stop a long run
     motion_holder: dict[str, FeatureMotion] = {}
+    keypoints: list[int] = []
 
     def after_matching(database: Path) -> None:
         motion_holder["motion"] = feature_motion(database)
+        keypoints.extend(keypoint_counts(database))
         check_motion(motion_holder["motion"], diagonal, cfg.static_motion_fraction, cfg.frames_dir)
 
     with atomic_dir(cfg.out_dir, "poses", inputs=[cfg.frames_dir, cfg.masks_dir],
@@ -93,7 +96,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         motion = motion_holder["motion"]
         rec = sfm.reconstruction
         registered = set(registered_poses(rec)) if rec is not None else set()
-        detail, advice = registration_detail(rec, sfm, pre, cfg)
+        detail, advice = registration_detail(rec, sfm, pre, cfg, keypoints,
+                                             None if mask_stats is None else mask_stats.mean_excluded_fraction)
         # even with --min-registered 0 a model needs two posed frames to be a model at all
         min_fraction = max(cfg.min_registered, 2 / len(names))
         check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
@@ -163,13 +167,24 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
 
 
 def registration_detail(rec: pycolmap.Reconstruction | None, sfm: SfmResult, pre: MotionPrecheck,
-                        cfg: PosesConfig) -> tuple[str, str]:
-    """What the registration error adds to its numbers, and the advice that fits what was tried."""
+                        cfg: PosesConfig, keypoints: list[int] | None = None,
+                        masked_fraction: float | None = None) -> tuple[str, str]:
+    """What the registration error adds to its numbers, and the advice that fits what was tried.
+
+    ``keypoints``: SIFT features kept per frame; ``masked_fraction``: the mean share of a frame the object
+    masks hide (None without masks)."""
     detail = "" if rec is not None else " (COLMAP found no pair of frames to start a model from)"
     if sfm.n_models > 1:
         detail += f" (the sequence broke into {sfm.n_models} separate models; the largest is kept)"
     advice = registration_advice(cfg, sfm.matcher)
-    if pre.rotation_only_fraction == 1.0:
+    shortage = feature_shortage(keypoints or [], masked_fraction)
+    if shortage is not None:
+        # too little to match in the frames themselves: matching harder or moving otherwise will not help first;
+        # the pre-check's corners track as poorly then, so its "no parallax" is no evidence of a turn on the spot
+        # (a 70-degree orbit of low-contrast frames showed none; docs/poses.md, Quality gate)
+        detail += shortage[0]
+        advice = shortage[1] + "; else " + advice
+    elif pre.rotation_only_fraction == 1.0:
         # every moving pair fits a homography: a camera turning on the spot has nothing to triangulate
         detail += " (every sampled frame pair that moves shows no parallax: the camera turns on the spot)"
         advice = STATIC_ADVICE + "; else " + advice

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 from pathlib import Path
 
 from stages.scene import frame_id_of
@@ -18,6 +19,13 @@ STATIC_ADVICE = (
     "move the camera through the room (walk around, do not only turn on the spot): COLMAP needs "
     "translation between frames to triangulate; a fixed camera cannot be posed by structure from motion"
 )
+
+INIT_MIN_INLIERS = 100
+"""Verified matches COLMAP's mapper needs between two frames to start a model (pycolmap 4.2.1,
+``IncrementalMapperOptions.init_min_num_inliers``)."""
+FEW_FEATURES = 2 * INIT_MIN_INLIERS
+"""A failed registration whose frames keep a median of fewer SIFT features than this is put down to the frames
+first (too little texture, or masks over most of the view), not to the matching (docs/poses.md, Quality gate)."""
 
 
 def frames_all_kept(frames_dir: Path) -> bool:
@@ -46,6 +54,30 @@ def registration_advice(cfg: PosesConfig, matcher: str) -> str:
     if cfg.min_registered > 0.5:
         advice += f" (or lower --min-registered, now {cfg.min_registered:g}, if a partial model is acceptable)"
     return advice
+
+
+def feature_shortage(counts: list[int], masked_fraction: float | None) -> tuple[str, str] | None:
+    """``(detail, advice)`` for a failed registration whose frames hold few features, else None.
+
+    ``counts``: SIFT features kept per frame (after the object masks); ``masked_fraction``: the share of a frame
+    the (dilated) object masks hide on average, None without masks.
+    """
+    if not counts:
+        return None
+    median = statistics.median(counts)
+    if median >= FEW_FEATURES:
+        return None
+    masks = "" if masked_fraction is None else \
+        f" outside the object masks, which hide {masked_fraction:.0%} of a frame on average"
+    detail = (f" (the frames hold few features: SIFT kept a median of {median:.0f} per frame ({min(counts)} in the "
+              f"poorest){masks}; COLMAP starts a model from {INIT_MIN_INLIERS} verified matches between two frames)")
+    if masked_fraction is not None and masked_fraction > 0.5:
+        advice = ("the moving objects fill most of the view: film with more of the static room in view (step back "
+                  "from them, or use a wider lens)")
+    else:
+        advice = ("film with more texture in view: plain walls and large plain furniture give SIFT little to match "
+                  "(keep patterned surfaces, shelves or pictures in the frame)")
+    return detail, advice
 
 
 def too_few_frames_advice(frames_dir: Path) -> str:
