@@ -29,6 +29,7 @@ from .quality_gate import (
     feature_shortage,
     intrinsics_warnings,
     registration_advice,
+    split_model_warning,
     too_few_frames_advice,
 )
 from .sfm import SfmResult, resolve_matcher, run_sfm
@@ -111,6 +112,9 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
             dropped = compact_names(judged.trimmed, order=ordered)
             detail += f" ({len(judged.trimmed)} frames dropped as jumps: {dropped})"
         fraction = check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)
+        left_out = [n for n in ordered if n not in registered and n not in judged.trimmed]
+        if (split := split_model_warning(sfm.n_models, left_out, ordered, registration_advice(cfg, sfm.matcher))):
+            warnings_.append(split)
 
         t0 = time.perf_counter()
         # a gravity- and wall-aligned world before anything is written, so every output shares it

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -10,10 +11,16 @@ import numpy as np
 import pytest
 from poses_testdata import orbit_poses, write_sequence
 
-from stages.poses import PosesConfig, StaticCameraError, estimate_poses
+from stages.poses import PosesConfig, StaticCameraError, estimate_poses, pipeline
 from stages.poses.cli import main
 from stages.poses.pipeline import registration_detail
-from stages.poses.quality_gate import compact_names, intrinsics_warnings, registration_advice, too_few_frames_advice
+from stages.poses.quality_gate import (
+    compact_names,
+    intrinsics_warnings,
+    registration_advice,
+    split_model_warning,
+    too_few_frames_advice,
+)
 from stages.poses.sfm import SfmResult
 from stages.poses.static_check import MotionPrecheck
 from stages.scene import InputError, write_json
@@ -39,7 +46,8 @@ def test_static_camera_is_reported_as_such(tmp_path: Path) -> None:
     assert not out.exists()
 
 
-def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """8 frames of the room, then 4 of a room with other textures (nothing matches them): 67% < 80%."""
     frames = tmp_path / "frames"
     write_sequence(frames, orbit_poses(8))
@@ -57,10 +65,15 @@ def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pyte
     assert "--matcher exhaustive" not in err and "overlap" in err and "sharper frames" in err
     assert "lower --min-registered, now 0.8" in err
     assert not out.exists()
-    # a lower bar accepts the partial model and records what is missing
+    # a lower bar accepts the partial model and records what is missing; had the other room's frames made a
+    # model of their own (COLMAP keeps the largest), the run warns with the frames it leaves out
+    real_sfm = pipeline.run_sfm
+    monkeypatch.setattr(pipeline, "run_sfm", lambda *a, **k: dataclasses.replace(real_sfm(*a, **k), n_models=2))
     summary = estimate_poses(PosesConfig(frames_dir=frames, out_dir=out, threads=2, min_registered=0.6,
                                          progress=False))
     assert summary["unregistered"] == [f"frame_{i:05d}.png" for i in range(8, 12)]
+    assert [w for w in summary["warnings"] if "broke into 2 separate models" in w and
+            "4 frame(s) of the others are left out: frame_00008..frame_00011 (4)" in w]
 
 
 def test_advice_leaves_out_what_was_tried(tmp_path: Path) -> None:
@@ -137,3 +150,11 @@ def test_feature_shortage_detail_and_advice(tmp_path: Path) -> None:
     detail, advice = registration_detail(None, sfm, turn, cfg, [100, 150, 250, 300], None)
     assert "few features" not in detail and "the camera turns on the spot" in detail
     assert advice.startswith("move the camera through the room")
+
+
+def test_a_run_that_passes_with_several_models_warns_with_the_frames_it_leaves_out():
+    ordered = [f"frame_{i:05d}.png" for i in range(10)]
+    assert split_model_warning(1, ordered[7:], ordered, "try X") is None  # one model: the gate said all there is
+    line = split_model_warning(2, ordered[7:], ordered, "try X")
+    assert "broke into 2 separate models" in line and "3 frame(s) of the others are left out" in line
+    assert "frame_00007..frame_00009 (3)" in line and line.endswith("To keep them, try X")
