@@ -295,12 +295,12 @@ def _inside_room(room: list[float], position: list[float], size: list[float], ya
 
 def _joint_range(o: ObjectSpec, path: Path, where: str) -> None:
     """An object's ``limits`` must open it (closed < open, 0 = shut against the carcass) without passing through
-    its own carcass: a door or lid by at most 180 degrees, a drawer by at most its tray's depth (the carcass depth
-    less the front panel and 1 cm of runners, ``geometry._articulated``), so the tray never leaves its runners."""
+    its own carcass: a door or lid by at most 180 degrees, a drawer by at most the carcass's depth (a
+    full-extension drawer; further, its tray would float in front of the carcass)."""
     closed, opened = (float(v) for v in o.limits)
     if o.kind == "drawer":
-        reach, unit = o.size[1] - o.thickness - 0.01, "m"
-        fix = f"give [closed, open] in metres with 0 <= closed < open <= {reach:.3g} (the tray's depth)"
+        reach, unit = float(o.size[1]), "m"
+        fix = f"give [closed, open] in metres with 0 <= closed < open <= {reach:.3g} (the carcass's depth)"
     else:
         reach, unit = 180.0, "degrees"
         fix = "give [closed, open] in degrees with 0 <= closed < open <= 180"

@@ -53,8 +53,8 @@ REFUSED = [
     (lambda d: d["key_frames"].update(noise_std=-0.01), "key_frames.every >= 1 and noise_std >= 0"),
     (lambda d: d["render"]["lights"][0].update(position=[0.0, 0.0]), "render.lights[0].position"),
     (lambda d: d["furniture"][0].update(size=[0.8, 0.0, 0.7]), "furniture[0].size"),
-    # tiny.yaml's drawer: depth 0.5, thickness 0.02 -> a tray 0.47 m deep
-    (lambda d: d["objects"][1].update(limits=[0.0, 0.48]), "objects[1] (drawer).limits [0.0, 0.48] (m) do not open"),
+    # tiny.yaml's drawer: depth 0.5
+    (lambda d: d["objects"][1].update(limits=[0.0, 0.51]), "objects[1] (drawer).limits [0.0, 0.51] (m) do not open"),
     (lambda d: d["objects"][1].update(limits=[-0.1, 0.3]), "objects[1] (drawer).limits [-0.1, 0.3] (m)"),
     (lambda d: d["objects"][0].update(limits=[100, 0]), "objects[0] (cabinet).limits [100.0, 0.0] (degrees)"),
     (lambda d: d["objects"][0].update(limits=[0, 0]), "objects[0] (cabinet).limits [0.0, 0.0] (degrees)"),
@@ -86,7 +86,7 @@ ACCEPTED = [
     lambda d: _walk(d, [[0.0, -1.0, 1.5], [1.0, -1.0, 1.5]]),
     lambda d: d["key_frames"].update(every=1, noise_std=0.0),
     lambda d: d.update(mask_scope="moving"),
-    lambda d: d["objects"][1].update(limits=[0.0, 0.47]),  # the tray's whole depth
+    lambda d: d["objects"][1].update(limits=[0.0, 0.5]),  # pulled out by its whole depth
     lambda d: d["objects"][0].update(limits=[10, 180]),
     lambda d: d["key_frames"].update(decimals=0),
     lambda d: d["render"].update(ambient=0.0),
