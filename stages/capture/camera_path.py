@@ -71,6 +71,37 @@ def check_view_directions(centres: np.ndarray, target: np.ndarray, spec_path: st
             f"{fix} (camera.waypoints, or camera.radius and camera.height)")
 
 
+def check_camera_in_free_space(centres: np.ndarray, spec: CaptureSpec, spec_path: str | Path) -> None:
+    """Refuse a path whose camera leaves the room or enters a carcass or a piece of furniture: it would film the
+    walls from outside or the inside of a box, and its frames would show nothing of the room the spec describes."""
+    room = np.asarray(spec.room, dtype=np.float64)
+    lo = np.array([-room[0] / 2, -room[1] / 2, 0.0]) + MIN_DISTANCE_M
+    hi = np.array([room[0] / 2, room[1] / 2, room[2]]) - MIN_DISTANCE_M
+    outside = np.flatnonzero(((centres < lo) | (centres > hi)).any(axis=1))
+    if outside.size:
+        i = int(outside[0])
+        raise CaptureSpecError(
+            spec_path, f"the camera of frame {i} (of {outside.size} such frames) at {np.round(centres[i], 3).tolist()} "
+            f"m is outside the room, or within {MIN_DISTANCE_M:g} m of a wall, the floor or the ceiling (room "
+            f"{[float(v) for v in spec.room]}: x and y centred on 0, floor at z = 0)",
+            "keep the camera path inside the room (camera.radius and camera.height, or camera.waypoints; hand "
+            "shake adds camera.jitter.position)")
+    boxes = [(f"objects ({o.name})", o) for o in spec.objects] + [(f"furniture ({f.name})", f) for f in spec.furniture]
+    for where, box in boxes:
+        yaw = np.radians(box.yaw_deg)
+        d = centres - np.asarray(box.position, dtype=np.float64)
+        local_x = np.cos(yaw) * d[:, 0] + np.sin(yaw) * d[:, 1]  # the footprint's own axes (turned back by yaw)
+        local_y = -np.sin(yaw) * d[:, 0] + np.cos(yaw) * d[:, 1]
+        inside = np.flatnonzero((np.abs(local_x) < box.size[0] / 2) & (np.abs(local_y) < box.size[1] / 2)
+                                & (d[:, 2] > 0.0) & (d[:, 2] < box.size[2]))
+        if inside.size:
+            i = int(inside[0])
+            raise CaptureSpecError(
+                spec_path, f"the camera of frame {i} (of {inside.size} such frames) at "
+                f"{np.round(centres[i], 3).tolist()} m is inside {where}",
+                "route the camera path around it (camera.radius and camera.height, or camera.waypoints)")
+
+
 def _camera_centres(spec: CaptureSpec) -> np.ndarray:
     """``[n_frames, 3]`` camera centres in metres before hand shake (the path's smoothed positions)."""
     path = spec.camera
@@ -97,6 +128,7 @@ def camera_path(spec: CaptureSpec, spec_path: str | Path = "<spec>") -> np.ndarr
     angles = shake(times_s, np.deg2rad(j.rotation_deg), j.frequency_hz, rng)
     target = np.asarray(path.target, dtype=np.float64)
     check_view_directions(centres, target, spec_path)
+    check_camera_in_free_space(centres, spec, spec_path)
     poses = np.empty((n, 4, 4))
     for i in range(n):
         pose = look_at(centres[i], target)

@@ -175,8 +175,9 @@ class CameraPathSpec:
     """orbit (arc around a target) or walk (through waypoints, looking at a target)."""
     target: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.6])
     """Point looked at, metres."""
-    radius: float = 2.0
-    """orbit: horizontal distance from the target, metres."""
+    radius: float = 1.6
+    """orbit: horizontal distance from the target, metres (the default stays 0.4 m inside the default room's
+    walls; 2.0 put the camera on the wall)."""
     height: float = 1.4
     """orbit: camera height above the floor, metres."""
     start_deg: float = -40.0

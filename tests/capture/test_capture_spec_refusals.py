@@ -61,6 +61,12 @@ REFUSED = [
     (lambda d: d["objects"][0].update(limits=[-90, 0]), "objects[0] (cabinet).limits [-90.0, 0.0] (degrees)"),
     (lambda d: d["objects"][0].update(limits=[0, 181]), "with 0 <= closed < open <= 180"),
     (lambda d: d["key_frames"].update(decimals=-1), "key_frames.decimals is -1"),
+    # tiny.yaml's room is 4.0 x 3.6 x 2.5; a camera at 2.47 m is within 5 cm of the ceiling
+    (lambda d: d["camera"].update(height=2.47), "is outside the room, or within 0.05 m of a wall"),
+    (lambda d: d["camera"].update(radius=3.0), "is outside the room"),  # x = 3 sin(57 deg) = 2.5 > 2.0
+    # the table spans x -1.5..-0.7, y 0.2..0.8, z 0..0.72; the cabinet x -0.75..-0.15, y 1.25..1.75, z 0..0.9
+    (lambda d: _walk(d, [[-1.4, 0.5, 0.5], [-0.8, 0.5, 0.5]]), "is inside furniture (table)"),
+    (lambda d: _walk(d, [[-0.6, 1.4, 0.5], [-0.3, 1.4, 0.5]]), "is inside objects (cabinet)"),
     (lambda d: d["render"].update(ambient=-0.1), "render.ambient -0.1 is outside [0, 1]"),
     (lambda d: d["render"].update(ambient=1.5), "render.ambient 1.5 is outside [0, 1]"),
     (lambda d: d["render"]["lights"][0].update(intensity=-0.5), "render.lights[0].intensity -0.5 is negative"),
@@ -87,6 +93,8 @@ ACCEPTED = [
     lambda d: d["key_frames"].update(every=1, noise_std=0.0),
     lambda d: d.update(mask_scope="moving"),
     lambda d: d["objects"][1].update(limits=[0.0, 0.5]),  # pulled out by its whole depth
+    lambda d: _walk(d, [[-1.4, 0.5, 0.8], [-0.8, 0.5, 0.8]]),  # over the table (0.72 m high)
+    lambda d: d["camera"].update(height=2.4),
     lambda d: d["objects"][0].update(limits=[10, 180]),
     lambda d: d["key_frames"].update(decimals=0),
     lambda d: d["render"].update(ambient=0.0),
