@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from stages.scene import InputError, read_yaml_mapping
 from stages.scene.dataset import names_read_alike, object_name_problem
 from stages.scene.typed_yaml import from_mapping
@@ -294,6 +296,44 @@ def _inside_room(room: list[float], position: list[float], size: list[float], ya
             "move it inside the room (its position is the centre of its footprint's bottom face) or make it smaller")
 
 
+OVERLAP_TOLERANCE_M = 0.001
+"""Boxes may touch (stacked drawers, a cabinet against a table) and interpenetrate by up to this much."""
+
+
+def _footprint_corners(position: list[float], size: list[float], yaw_deg: float) -> np.ndarray:
+    """The four corners [4, 2] of a yawed footprint (x, y)."""
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64) * np.array(size[:2]) / 2
+    return half @ np.array([[c, s], [-s, c]]) + np.array(position[:2], dtype=np.float64)
+
+
+def _penetration(a: tuple[list[float], list[float], float], b: tuple[list[float], list[float], float]) -> float:
+    """How deep two boxes (position, size, yaw) interpenetrate, metres (<= 0: apart or touching): the smallest
+    overlap over the separating axes of two upright boxes (each footprint's two edge directions, and z)."""
+    (pa, sa, ya), (pb, sb, yb) = a, b
+    depth = min(pa[2] + sa[2], pb[2] + sb[2]) - max(pa[2], pb[2])
+    ca, cb = _footprint_corners(pa, sa, ya), _footprint_corners(pb, sb, yb)
+    for yaw in (ya, yb):
+        for axis in (np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw))]),
+                     np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])):
+            ra, rb = ca @ axis, cb @ axis
+            depth = min(depth, min(ra.max(), rb.max()) - max(ra.min(), rb.min()))
+    return float(depth)
+
+
+def _no_overlaps(spec: CaptureSpec, path: Path) -> None:
+    """Carcasses and furniture must not interpenetrate: the masks would give the shared space to whichever box
+    the renderer meets first, and a door or drawer would open through the other box."""
+    boxes = [(f"objects[{i}] ({o.name})", (o.position, o.size, o.yaw_deg)) for i, o in enumerate(spec.objects)]
+    boxes += [(f"furniture[{i}] ({f.name})", (f.position, f.size, f.yaw_deg)) for i, f in enumerate(spec.furniture)]
+    for (name_a, a), (name_b, b) in itertools.combinations(boxes, 2):
+        depth = _penetration(a, b)
+        if depth > OVERLAP_TOLERANCE_M:
+            raise CaptureSpecError(path, f"{name_a} and {name_b} overlap by {depth:.3g} m",
+                                   "move one of them (position is the centre of the footprint's bottom face) or "
+                                   "make it smaller; boxes may touch")
+
+
 def _joint_range(o: ObjectSpec, path: Path, where: str) -> None:
     """An object's ``limits`` must open it (closed < open, 0 = shut against the carcass) without passing through
     its own carcass: a door or lid by at most 180 degrees, a drawer by at most the carcass's depth (a
@@ -383,6 +423,7 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
         _vec(f.position, 3, path, f"furniture[{i}].position")
         _vec(f.size, 3, path, f"furniture[{i}].size", positive=True)
         _inside_room(spec.room, f.position, f.size, f.yaw_deg, path, f"furniture[{i}] ({f.name})")
+    _no_overlaps(spec, path)
     c = spec.camera
     if c.kind not in CAMERA_KINDS:
         raise CaptureSpecError(path, f"camera.kind {c.kind!r} unknown", f"use one of {CAMERA_KINDS}")

@@ -67,6 +67,12 @@ REFUSED = [
     # the table spans x -1.5..-0.7, y 0.2..0.8, z 0..0.72; the cabinet x -0.75..-0.15, y 1.25..1.75, z 0..0.9
     (lambda d: _walk(d, [[-1.4, 0.5, 0.5], [-0.8, 0.5, 0.5]]), "is inside furniture (table)"),
     (lambda d: _walk(d, [[-0.6, 1.4, 0.5], [-0.3, 1.4, 0.5]]), "is inside objects (cabinet)"),
+    # the drawer (0.7 wide) at x = 0.1 spans -0.25..0.45, 0.1 m into the cabinet (-0.75..-0.15)
+    (lambda d: d["objects"][1].update(position=[0.1, 1.5, 0.0]), "objects[0] (cabinet) and objects[1] (drawer) "
+                                                                 "overlap by 0.1 m"),
+    # the shelf (0.4 x 0.9) at x = -0.6 spans -0.8..-0.4, 0.1 m into the table (-1.5..-0.7)
+    (lambda d: d["furniture"][1].update(position=[-0.6, 0.5, 0.0]), "furniture[0] (table) and furniture[1] (shelf) "
+                                                                    "overlap by 0.1 m"),
     (lambda d: d["render"].update(ambient=-0.1), "render.ambient -0.1 is outside [0, 1]"),
     (lambda d: d["render"].update(ambient=1.5), "render.ambient 1.5 is outside [0, 1]"),
     (lambda d: d["render"]["lights"][0].update(intensity=-0.5), "render.lights[0].intensity -0.5 is negative"),
@@ -95,6 +101,10 @@ ACCEPTED = [
     lambda d: d["objects"][1].update(limits=[0.0, 0.5]),  # pulled out by its whole depth
     lambda d: _walk(d, [[-1.4, 0.5, 0.8], [-0.8, 0.5, 0.8]]),  # over the table (0.72 m high)
     lambda d: d["camera"].update(height=2.4),
+    lambda d: d["objects"][1].update(position=[0.2, 1.5, 0.0]),  # flush against the cabinet's side
+    # a table turned by 45 degrees whose bounding square reaches into the shelf (x 1.4..1.8, y 0.65..1.55) but
+    # whose sides do not: the shelf's nearest corner lies (0.45 + 0.15) / sqrt(2) = 0.424 > 0.4 m along its width
+    lambda d: d["furniture"][0].update(position=[0.95, 0.5, 0.0], yaw_deg=45),
     lambda d: d["objects"][0].update(limits=[10, 180]),
     lambda d: d["key_frames"].update(decimals=0),
     lambda d: d["render"].update(ambient=0.0),
