@@ -34,6 +34,8 @@ CONVERT_FIX = ("convert photos the stage cannot read (HEIC, RAW such as DNG) to 
                "a video belongs in --video by itself, not in a folder of frames")
 RECOPY_FIX = ("copy the images again from the camera or phone (these copies are incomplete or damaged), "
               "or delete the broken ones")
+SYSTEM_FILES = {"thumbs.db", "ehthumbs.db", "desktop.ini"}
+"""Files an operating system writes into a folder of photos (lower case): no frames, and not worth a warning."""
 MAX_CONSECUTIVE_FAILURES = 16
 """A video read that fails is retried this many times in a row before the rest of the video counts as missing."""
 
@@ -216,8 +218,10 @@ class ImageFolderSource:
 
     def __init__(self, path: Path, fps: float | None = None) -> None:
         self.path = Path(path)
-        # hidden files are no frames: macOS leaves ``._IMG_0001.jpg`` (its metadata) beside every photo it copies
-        visible = [p for p in self.path.iterdir() if p.is_file() and not p.name.startswith(".")]
+        # hidden files are no frames: macOS leaves ``._IMG_0001.jpg`` (its metadata) beside every photo it copies;
+        # nor are the thumbnail caches and folder settings Windows writes into a folder of photos
+        visible = [p for p in self.path.iterdir()
+                   if p.is_file() and not p.name.startswith(".") and p.name.lower() not in SYSTEM_FILES]
         files = [p for p in visible if p.suffix.lower() in IMAGE_SUFFIXES]
         self.skipped = sorted((p for p in visible if p.suffix.lower() not in IMAGE_SUFFIXES), key=natural_key)
         """Files of the folder that are not images this stage reads (HEIC, RAW, sidecars): warned of by name."""

@@ -66,11 +66,13 @@ def test_files_the_stage_cannot_read_are_named_not_skipped_silently(tmp_path: Pa
     (folder / "IMG_4.HEIC").write_bytes(b"\x00\x00\x00\x18ftypheic")
     (folder / "IMG_5.heic").write_bytes(b"\x00\x00\x00\x18ftypheic")
     (folder / ".DS_Store").write_bytes(b"\x00")
+    (folder / "Thumbs.db").write_bytes(b"\x00")  # Windows' thumbnail cache: no frame, and nothing to convert
+    (folder / "desktop.ini").write_text("[.ShellClassInfo]")
     out = tmp_path / "frames"
     code, err = run_cli(capsys, "--video", str(folder), "--out", str(out))
     assert code == 0
     assert "left out 2 other files (2 .heic: IMG_4.HEIC, IMG_5.heic)" in err and "convert" in err
-    assert ".DS_Store" not in err
+    assert ".DS_Store" not in err and "Thumbs.db" not in err and "desktop.ini" not in err
     assert json.loads((out / "frames.json").read_text())["skipped_files"] == ["IMG_4.HEIC", "IMG_5.heic"]
     only = tmp_path / "heic"
     only.mkdir()
