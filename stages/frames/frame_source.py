@@ -97,16 +97,17 @@ class VideoSource:
                                    "copy the video again from the recording device")
         with self.path.open("rb") as handle:
             head = handle.read(len(PNG_MAGIC))
+        # a file that starts as a JPEG or PNG is a photo when it holds one frame (FFmpeg opens a photo as a video
+        # of one frame, which no later stage can use), but a camera's raw MJPEG stream (JPEGs one after another,
+        # `ffmpeg -f mjpeg`) or an animated PNG is a video
         still = "JPEG" if head.startswith(JPEG_MAGIC) else "PNG" if head.startswith(PNG_MAGIC) else None
-        if still:  # FFmpeg opens a photo as a video of one frame, which no later stage can use
-            raise FrameSourceError(self.path, f"the file is a {still} photo, not a video (whatever its name says)",
-                                   "pass the video file itself, or put the photos of the capture in a folder and pass "
-                                   "that folder as --video")
         with StderrCapture() as stderr:
             capture, text = stderr.call(lambda: cv2.VideoCapture(str(self.path)))
         said = DecoderReport.from_text(text)
         lines = tuple(dict.fromkeys(said.damage + said.remarks))  # FFmpeg repeats a line per probe
         self.remarks: tuple[str, ...] = lines  # what FFmpeg printed while opening it (warned of, naming the video)
+        if not capture.isOpened() and still:
+            raise self._photo_error(still)
         if not capture.isOpened():
             raise FrameSourceError(self.path, "OpenCV cannot open it as a video (unknown format, corrupt data, "
                                    "or an mp4 cut off before its index)"
@@ -125,8 +126,15 @@ class VideoSource:
         capture.release()
         # some streams do not declare a length: count by grabbing (no decoding) so windows can be planned
         self.n_declared = declared if declared > 0 else self.count_frames()
+        if still and self.n_declared <= 1:
+            raise self._photo_error(still)
         if self.n_declared <= 0:
             raise FrameSourceError(self.path, "the video holds no frames that OpenCV can read", REENCODE_FIX)
+
+    def _photo_error(self, kind: str) -> FrameSourceError:
+        return FrameSourceError(self.path, f"the file is a {kind} photo, not a video (whatever its name says)",
+                                "pass the video file itself, or put the photos of the capture in a folder and pass "
+                                "that folder as --video")
 
     def count_frames(self) -> int:
         """Frames of a stream that declares no length, or more than it declares; what FFmpeg prints meanwhile

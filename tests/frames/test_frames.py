@@ -199,6 +199,16 @@ def test_truncated_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert read_table(out)["source_index"].tolist() == list(range(last))
 
 
+def test_a_raw_mjpeg_stream_is_a_video_not_a_photo(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # a camera's raw MJPEG stream (`ffmpeg -f mjpeg`): 12 JPEGs one after another, starting as a JPEG photo does
+    stream = tmp_path / "cam.mjpeg"
+    stream.write_bytes(b"".join(cv2.imencode(".jpg", textured_frame(k))[1].tobytes() for k in range(12)))
+    out = tmp_path / "frames"
+    code, err = run_cli(capsys, "--video", str(stream), "--out", str(out))
+    assert code == 0 and "photo" not in err
+    assert read_table(out)["source_index"].tolist() == list(range(12))
+
+
 def test_a_video_holding_more_frames_than_it_declares_is_read_to_its_end(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # 20 frames whose headers declare 10: the frames after the tenth were left out unsaid
