@@ -337,7 +337,8 @@ def _no_overlaps(spec: CaptureSpec, path: Path) -> None:
 def _joint_range(o: ObjectSpec, path: Path, where: str) -> None:
     """An object's ``limits`` must open it (closed < open, 0 = shut against the carcass) without passing through
     its own carcass: a door or lid by at most 180 degrees, a drawer by at most the carcass's depth (a
-    full-extension drawer; further, its tray would float in front of the carcass)."""
+    full-extension drawer; its tray, shorter than the carcass by the front panel and 1 cm of runners
+    (``geometry._articulated``), already clears the carcass then, and further would float further in front)."""
     closed, opened = (float(v) for v in o.limits)
     if o.kind == "drawer":
         reach, unit = float(o.size[1]), "m"

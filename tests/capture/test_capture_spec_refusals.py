@@ -67,6 +67,7 @@ REFUSED = [
     # the table spans x -1.5..-0.7, y 0.2..0.8, z 0..0.72; the cabinet x -0.75..-0.15, y 1.25..1.75, z 0..0.9
     (lambda d: _walk(d, [[-1.4, 0.5, 0.5], [-0.8, 0.5, 0.5]]), "is inside furniture (table)"),
     (lambda d: _walk(d, [[-0.6, 1.4, 0.5], [-0.3, 1.4, 0.5]]), "is inside objects (cabinet)"),
+    (lambda d: d["camera"].update(height=0.03), "is outside the room, or within 0.05 m of a wall, the floor"),
     # the drawer (0.7 wide) at x = 0.1 spans -0.25..0.45, 0.1 m into the cabinet (-0.75..-0.15)
     (lambda d: d["objects"][1].update(position=[0.1, 1.5, 0.0]), "objects[0] (cabinet) and objects[1] (drawer) "
                                                                  "overlap by 0.1 m"),
@@ -102,6 +103,8 @@ ACCEPTED = [
     lambda d: _walk(d, [[-1.4, 0.5, 0.8], [-0.8, 0.5, 0.8]]),  # over the table (0.72 m high)
     lambda d: d["camera"].update(height=2.4),
     lambda d: d["objects"][1].update(position=[0.2, 1.5, 0.0]),  # flush against the cabinet's side
+    # on top of the cabinet (0.9 m high), their footprints overlapping: touching, one above the other
+    lambda d: d["objects"][1].update(position=[-0.45, 1.5, 0.9]),
     # a table turned by 45 degrees whose bounding square reaches into the shelf (x 1.4..1.8, y 0.65..1.55) but
     # whose sides do not: the shelf's nearest corner lies (0.45 + 0.15) / sqrt(2) = 0.424 > 0.4 m along its width
     lambda d: d["furniture"][0].update(position=[0.95, 0.5, 0.0], yaw_deg=45),
@@ -111,6 +114,32 @@ ACCEPTED = [
     lambda d: d["render"].update(ambient=1.0),
     lambda d: d["render"]["lights"][0].update(intensity=0.0),
 ]
+
+
+def _table_turned_by_30_degrees_and_a_still_camera(data: dict, x: float, y: float) -> None:
+    data["furniture"][0].update(yaw_deg=30)
+    _walk(data, [[x, y, 0.5], [x, y, 0.505]])
+    data["camera"]["jitter"] = {"position": 0.0, "rotation_deg": 0.0}
+
+
+# the table (0.8 x 0.6, centre -1.1, 0.5) turned by 30 degrees: a point 0.38 m along its turned width and +-0.28 m
+# along its turned depth from its centre lies inside it, at x, y = -1.1 + 0.38 cos 30 -+ 0.28 sin 30,
+# 0.5 + 0.38 sin 30 +- 0.28 cos 30; both points lie outside the unturned table (0.43 m along y, 0.47 m along x)
+@pytest.mark.parametrize(("x", "y"), [(-0.911, 0.933), (-0.631, 0.448)])
+def test_a_camera_inside_a_turned_box_is_refused(x, y):
+    data = _tiny()
+    _table_turned_by_30_degrees_and_a_still_camera(data, x, y)
+    with pytest.raises(CaptureSpecError, match=r"is inside furniture \(table\)"):
+        spec_from_dict(data, TINY)
+
+
+def test_a_camera_beside_a_turned_box_is_accepted():
+    # 0.37 m along x and -0.27 m along y from the table's centre: inside the unturned table, but in the turned
+    # table's axes 0.37 cos 30 - 0.27 sin 30 = 0.185 along its width and -0.37 sin 30 - 0.27 cos 30 = -0.419
+    # along its depth, beyond its half depth of 0.3
+    data = _tiny()
+    _table_turned_by_30_degrees_and_a_still_camera(data, -0.73, 0.23)
+    spec_from_dict(data, TINY)
 
 
 @pytest.mark.parametrize("edit", ACCEPTED)
