@@ -101,6 +101,34 @@ def test_an_object_leaving_through_the_border_is_no_loss(tmp_path: Path) -> None
     assert found == [("vanishes", "00010", "door", 300)]
 
 
+def test_an_object_entering_through_the_border_is_not_found_late(tmp_path: Path) -> None:
+    """The reverse: nothing in 00000, then the drawer slides in from the right border (x 59, 54, 48, 46, 44): 100
+    and 200 pixels cut by the border, under its usual size (300), then 300; it entered, it was not found late. The
+    door appears mid-image in 00002 with 300 pixels: found late, or a ghost."""
+    maps = [np.zeros((HEIGHT, WIDTH), np.uint8)]
+    for t, x in enumerate([59, 54, 48, 46, 44], start=1):
+        lab = _frame(t, DOOR, None)
+        lab[10:30, x : x + 15] = DRAWER
+        maps.append(lab)
+    assert [int((m == DRAWER).sum()) for m in maps] == [0, 100, 200, 300, 300, 300]
+    summary, _ = _ingest(tmp_path, maps)
+    found = [(w["kind"], w["frame"], w["object"], w["pixels"]) for w in summary["mask_warnings"]]
+    assert found == [("appears", "00002", "door", 300)]
+
+
+def test_an_object_under_the_reliable_size_vanishes_unremarked(tmp_path: Path) -> None:
+    """A door of 2 x 4 = 8 pixels in 00000-00004, gone in 00010: a quarter of its usual 8 pixels is 2, but it is
+    under H*W/300 = 48 * 64 / 300 = 10.24 pixels, too small for its loss to mean anything."""
+    maps = []
+    for t in range(N):
+        lab = _frame(t, None)
+        if t < N - 1:
+            lab[20:22, 10:14] = DOOR
+        maps.append(lab)
+    summary, _ = _ingest(tmp_path, maps)
+    assert "mask_warnings" not in summary
+
+
 def test_anti_aliased_edges_are_named(tmp_path: Path) -> None:
     """Ids 1 and 2: a 20 x 20 square of 2 whose edge was anti-aliased into a 1 px ring of 1 (84 pixels, each
     between a 0 and a 2 of its 3x3 window), and a 10 x 10 square of 1. Edge pixels (a window holding two values):
@@ -207,6 +235,24 @@ def test_anti_aliased_values_that_are_no_id_are_refused_as_such(tmp_path: Path) 
                 )
             )
         assert not (tmp_path / name / "labels").exists()
+
+
+def test_more_than_ten_unknown_values_are_listed_ten_and_counted(tmp_path: Path) -> None:
+    """Twelve 4 x 4 blocks of the unknown values 100..111, apart from each other on a background of 0 (none lies
+    between two values): the first ten are listed, and the two others counted."""
+    from stages.labels import LabelError
+
+    lab = np.zeros((HEIGHT, WIDTH), np.uint8)
+    for k in range(12):
+        lab[4:8, 5 * k : 5 * k + 4] = 100 + k
+    folder = tmp_path / "masks"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "frame_00000.png"), lab)
+    (tmp_path / "mapping.yaml").write_text(f"{DOOR}: door\n{DRAWER}: drawer\n")
+    with pytest.raises(LabelError, match=r"pixel values \[100, 101, 102, 103, 104, 105, 106, 107, 108, 109\] and 2 "
+                                         r"more are no id of [^,]*; fix: add"):
+        ingest_labels(LabelsConfig(input=folder, frames=write_frames(tmp_path, 1), out=tmp_path / "labels",
+                                   progress=False))
 
 
 def test_masks_numbered_from_1_are_said_to_be_one_late(tmp_path: Path, capsys) -> None:
