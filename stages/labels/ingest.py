@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from stages.scene import atomic_dir, frame_number_of, label_map_to_onehot, write_json, write_mask, write_yaml
 from stages.scene.dataset import names_read_alike
-from stages.scene.masks import UNRELIABLE_DIVISOR, USUAL_QUANTILE, USUAL_SHARE, unreliable_masks
+from stages.scene.masks import UNRELIABLE_DIVISOR, USUAL_QUANTILE, USUAL_SHARE, unreliable_masks, usual_sizes
 
 from . import mask_checks as checks
 from .coco_labels import read_coco_labels
@@ -253,8 +253,9 @@ def ingest_labels(config: LabelsConfig) -> dict:
                 overlaps[fid] = label_map.overlap_pixels
         write_yaml(tmp / "mapping.yaml", {k + 1: n for k, n in enumerate(names)})
         pixels = {f: per_frame[f]["pixels"] for f in order}
-        usual = {n: float(np.quantile(seen, USUAL_QUANTILE)) if (seen := [p[n] for p in pixels.values() if p[n]])
-                 else 0.0 for n in names}  # the unreliable rule's usual size, over the annotated frames
+        # the unreliable rule's usual size, over the annotated frames
+        usual = dict(zip(names, usual_sizes(np.array([[p[n] for n in names] for p in pixels.values()])).tolist(),
+                         strict=True))
         warnings.extend(checks.sudden_changes(neighbours, pixels, at_border, names, min_pixels, usual, USUAL_SHARE))
         warnings.sort(key=lambda w: (position[w["frame"]], w["kind"], names.index(w["object"])))
         if anti_aliased:

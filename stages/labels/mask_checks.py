@@ -101,17 +101,23 @@ def border_objects(labels: np.ndarray, names: list[str]) -> set[str]:
     return {names[k - 1] for k in np.unique(edge) if k}
 
 
+def between_and_edge_pixels(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two ``bool [H, W]`` maps of an id map's pixels: those whose value lies strictly between the smallest and the
+    largest value of their 3x3 window (the ribbon an anti-aliased or interpolated edge leaves: an edge between ids 0
+    and 3 passes through 1 and 2; never the background 0, which nothing lies under), and the edge pixels, whose
+    window holds two values or more."""
+    v = values.astype(np.float32)  # exact for 16-bit ids
+    kernel = np.ones((3, 3), np.uint8)
+    low = cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE)
+    high = cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE)
+    return (low < v) & (high > v), low != high
+
+
 def between_id_edges(labels: np.ndarray) -> tuple[int, int]:
     """(edge pixels holding an object id between a smaller and a larger id of their 3x3 window, edge pixels): the
-    trace of an anti-aliased id map or one resized with interpolation, where an edge between ids 0 and 3 passes
-    through 1 and 2."""
-    values = labels.astype(np.float32)
-    kernel = np.ones((3, 3), np.uint8)
-    low = cv2.erode(values, kernel, borderType=cv2.BORDER_REPLICATE)
-    high = cv2.dilate(values, kernel, borderType=cv2.BORDER_REPLICATE)
-    edges = int(np.count_nonzero(low != high))
-    between = int(np.count_nonzero((low < values) & (high > values) & (values > 0)))
-    return between, edges
+    trace of an anti-aliased id map or one resized with interpolation (``between_and_edge_pixels``)."""
+    between, edges = between_and_edge_pixels(labels)
+    return int(np.count_nonzero(between)), int(np.count_nonzero(edges))
 
 
 def warning_line(w: dict) -> str:

@@ -18,6 +18,7 @@ from stages.scene.mask_images import read_mask_image as read_stored_mask
 
 from .errors import LabelError
 from .label_set import LabelEntry, LabelMap, LabelSet
+from .mask_checks import between_and_edge_pixels
 from .name_table import NameTable
 
 JPEG_SUFFIXES = (".jpg", ".jpeg")
@@ -82,12 +83,9 @@ def _loader(path: Path, lut: np.ndarray, known: np.ndarray, table: NameTable):
 def _between_neighbours(img: np.ndarray, known: np.ndarray) -> bool:
     """True when at least half of the pixels of unknown value lie between a smaller and a larger value of their 3x3
     window: the ribbons an anti-aliased or interpolated id map has along its edges (docs/labels-states.md)."""
-    values = img.astype(np.float32)
-    kernel = np.ones((3, 3), np.uint8)
-    low = cv2.erode(values, kernel, borderType=cv2.BORDER_REPLICATE)
-    high = cv2.dilate(values, kernel, borderType=cv2.BORDER_REPLICATE)
+    between, _ = between_and_edge_pixels(img)
     stray = ~known[img]
-    return bool(np.count_nonzero(stray & (low < values) & (high > values)) >= 0.5 * np.count_nonzero(stray))
+    return bool(np.count_nonzero(stray & between) >= 0.5 * np.count_nonzero(stray))
 
 
 def _values(img: np.ndarray) -> np.ndarray:

@@ -98,6 +98,13 @@ USUAL_QUANTILE = 0.5
 capture's jewellery box, 31-190 pixels: with the 0.9 quantile 35 of its closed frames read as slivers)."""
 
 
+def usual_sizes(counts: np.ndarray) -> np.ndarray:
+    """[frames, objects] pixel counts -> [objects] each object's usual size: ``USUAL_QUANTILE`` of its counts over
+    the frames that show it (0 for an object no frame shows)."""
+    counts = np.asarray(counts, dtype=np.float64).reshape(len(counts), -1)
+    return np.array([np.quantile(c[c > 0], USUAL_QUANTILE) if (c > 0).any() else 0.0 for c in counts.T])
+
+
 def unreliable_masks(counts: np.ndarray, height: int, width: int) -> np.ndarray:
     """[frames, objects] pixel counts -> [frames, objects] bool: present, but too few pixels to trust.
 
@@ -105,6 +112,6 @@ def unreliable_masks(counts: np.ndarray, height: int, width: int) -> np.ndarray:
     object at its usual size is not. Where every object's usual size is at least 4 H W / 300 pixels this is the
     reference's rule exactly."""
     counts = np.asarray(counts, dtype=np.float64).reshape(len(counts), -1)
-    usual = np.array([np.quantile(c[c > 0], USUAL_QUANTILE) if (c > 0).any() else 0.0 for c in counts.T])
+    usual = usual_sizes(counts)
     limit = np.minimum(height * width / UNRELIABLE_DIVISOR, USUAL_SHARE * usual)
     return (counts > 0) & (counts < limit)
