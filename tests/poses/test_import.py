@@ -124,6 +124,17 @@ def test_import_with_the_image_folder(capture: tuple[Path, Path], tmp_path: Path
         np.testing.assert_allclose(frame["transform_matrix"], truth, atol=1e-9)
 
 
+def test_macos_metadata_copies_in_the_image_folder_are_no_frames(capture: tuple[Path, Path], tmp_path: Path) -> None:
+    # macOS writes ``._NAME`` (AppleDouble metadata, not an image) beside each photo it copies to a foreign disk
+    source = tmp_path / "photos"
+    shutil.copytree(capture[0], source)
+    for name in COLMAP_NAMES:
+        (source / f"._{name}").write_bytes(b"\x00\x05\x16\x07" + bytes(4000))
+    summary = import_model(ImportConfig(model_dir=_model(tmp_path), out_dir=tmp_path / "poses", images_dir=source,
+                                        orient=False))
+    assert summary["n_registered"] == len(NUMBERS) and summary["unregistered"] == []
+
+
 def test_model_made_at_full_resolution_is_rescaled(capture: tuple[Path, Path], tmp_path: Path) -> None:
     """A model of the full-size photos imported for frames at half their size: intrinsics and keypoints follow."""
     _source, frames = capture
