@@ -93,8 +93,10 @@ def test_a_digest_hashes_each_files_path_size_and_bytes_in_sorted_path_order(tmp
     (tmp_path / "a").mkdir()
     (tmp_path / "a" / "z.bin").write_bytes(b"\x00\x01\x02")
     (tmp_path / ".marker").write_bytes(b"done")
+    (tmp_path / ".partial").mkdir()  # a hidden folder, and all it holds
+    (tmp_path / ".partial" / "c.txt").write_bytes(b"half")
     files, digest = digest_path(tmp_path)
-    # "a/z.bin" sorts before "b.txt"; the hidden marker is left out
+    # "a/z.bin" sorts before "b.txt"; the hidden marker and folder are left out
     assert files == 2
     assert digest == hashlib.sha256(b"a/z.bin\x003\x00\x00\x01\x02" + b"b.txt\x002\x00xy").hexdigest()
     # a file's own digest names it by its file name
@@ -103,7 +105,7 @@ def test_a_digest_hashes_each_files_path_size_and_bytes_in_sorted_path_order(tmp
 
 
 def test_a_json_file_is_digested_without_its_volatile_keys_as_canonical_json(tmp_path):
-    (tmp_path / "run.json").write_text('{"steps": 10,\n "timings": {"total": 3.5, "n": 2}}')
+    (tmp_path / "run.json").write_text('{"timings": {"total": 3.5, "n": 2},\n "steps": 10}')  # keys sorted below
     rule = StageRule(json_keys={"run.json": ("timings.total",)})
     canonical = b'{"steps":10,"timings":{"n":2}}'
     expected = hashlib.sha256(b"run.json\x00%d\x00" % len(canonical) + canonical).hexdigest()
