@@ -121,14 +121,15 @@ def compact_names(names: list[str], limit: int = 40, order: list[str] | None = N
 
 def split_model_warning(n_models: int, left_out: list[str], ordered: list[str], advice: str) -> str | None:
     """The warning for a run that passed the registration gate although COLMAP's frames broke into ``n_models``
-    separate models: only the largest is kept, so ``left_out`` (the frames no model of the kept one posed, in
-    playback ``ordered``) are missing from the dataset; a user should know which, and why."""
+    separate models: only the largest is kept, so ``left_out`` (the frames the kept model does not pose: those of
+    the other models and any that no model posed, in playback ``ordered``) are missing from the dataset; a user
+    should know which, and why. COLMAP does not say which model a left-out frame was in, so neither does this."""
     if n_models <= 1:
         return None
     which = compact_names(left_out, limit=8, order=ordered) if left_out else "none"
     return (f"COLMAP's frames broke into {n_models} separate models (no shared features join them: a cut, a jump or "
-            f"a stretch without texture); the largest is kept, and {len(left_out)} frame(s) of the others are left "
-            f"out: {which}. To keep them, {advice}")
+            f"a stretch without texture); the largest is kept, and the {len(left_out)} frame(s) it does not pose (of "
+            f"the other models, or of none) are left out: {which}. To keep them, {advice}")
 
 
 def check_motion(motion: FeatureMotion, image_diagonal: float, min_fraction: float, frames_dir: Path) -> None:

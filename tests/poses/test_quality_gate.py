@@ -73,7 +73,8 @@ def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pyte
                                          progress=False))
     assert summary["unregistered"] == [f"frame_{i:05d}.png" for i in range(8, 12)]
     assert [w for w in summary["warnings"] if "broke into 2 separate models" in w and
-            "4 frame(s) of the others are left out: frame_00008..frame_00011 (4)" in w]
+            "the 4 frame(s) it does not pose (of the other models, or of none) are left out: "
+            "frame_00008..frame_00011 (4)" in w]
 
 
 def test_advice_leaves_out_what_was_tried(tmp_path: Path) -> None:
@@ -156,5 +157,6 @@ def test_a_run_that_passes_with_several_models_warns_with_the_frames_it_leaves_o
     ordered = [f"frame_{i:05d}.png" for i in range(10)]
     assert split_model_warning(1, ordered[7:], ordered, "try X") is None  # one model: the gate said all there is
     line = split_model_warning(2, ordered[7:], ordered, "try X")
-    assert "broke into 2 separate models" in line and "3 frame(s) of the others are left out" in line
+    assert "broke into 2 separate models" in line
+    assert "the 3 frame(s) it does not pose (of the other models, or of none) are left out" in line
     assert "frame_00007..frame_00009 (3)" in line and line.endswith("To keep them, try X")
