@@ -71,9 +71,10 @@ REFUSED = [
     # the drawer (0.7 wide) at x = 0.1 spans -0.25..0.45, 0.1 m into the cabinet (-0.75..-0.15)
     (lambda d: d["objects"][1].update(position=[0.1, 1.5, 0.0]), "objects[0] (cabinet) and objects[1] (drawer) "
                                                                  "overlap by 0.1 m"),
-    # the shelf (0.4 x 0.9) at x = -0.6 spans -0.8..-0.4, 0.1 m into the table (-1.5..-0.7)
-    (lambda d: d["furniture"][1].update(position=[-0.6, 0.5, 0.0]), "furniture[0] (table) and furniture[1] (shelf) "
-                                                                    "overlap by 0.1 m"),
+    # the cabinet (0.6 x 0.5) at x = -0.5, y = 0.5 spans x -0.8..-0.2, y 0.25..0.75: 0.1 m into the table along x
+    # (-1.5..-0.7), all 0.5 m of its depth along y (0.2..0.8), and 0.72 m along z
+    (lambda d: d["objects"][0].update(position=[-0.5, 0.5, 0.0]), "objects[0] (cabinet) and furniture[0] (table) "
+                                                                   "overlap by 0.1 m"),
     (lambda d: d["render"].update(ambient=-0.1), "render.ambient -0.1 is outside [0, 1]"),
     (lambda d: d["render"].update(ambient=1.5), "render.ambient 1.5 is outside [0, 1]"),
     (lambda d: d["render"]["lights"][0].update(intensity=-0.5), "render.lights[0].intensity -0.5 is negative"),
@@ -103,11 +104,17 @@ ACCEPTED = [
     lambda d: _walk(d, [[-1.4, 0.5, 0.8], [-0.8, 0.5, 0.8]]),  # over the table (0.72 m high)
     lambda d: d["camera"].update(height=2.4),
     lambda d: d["objects"][1].update(position=[0.2, 1.5, 0.0]),  # flush against the cabinet's side
+    # the shelf 0.1 m into the table: two pieces of furniture may overlap (an L-shaped counter), both are background
+    lambda d: d["furniture"][1].update(position=[-0.6, 0.5, 0.0]),
     # on top of the cabinet (0.9 m high), their footprints overlapping: touching, one above the other
     lambda d: d["objects"][1].update(position=[-0.45, 1.5, 0.9]),
-    # a table turned by 45 degrees whose bounding square reaches into the shelf (x 1.4..1.8, y 0.65..1.55) but
-    # whose sides do not: the shelf's nearest corner lies (0.45 + 0.15) / sqrt(2) = 0.424 > 0.4 m along its width
-    lambda d: d["furniture"][0].update(position=[0.95, 0.5, 0.0], yaw_deg=45),
+    # the cabinet (0.6 x 0.5) turned by 45 degrees: its corners reach (0.3 + 0.25) / sqrt(2) = 0.389 m from its
+    # centre along x and y (its bounding square), and its side facing +x, +y lies on x + y = 0.3 sqrt(2) = 0.424 m
+    # (offsets from its centre). 0.25 m left of and below the shelf's corner (1.4, 0.65) its bounding square reaches
+    # 0.139 m into the shelf but its side passes the corner (0.25 + 0.25 = 0.5 > 0.424): its own axes part them
+    lambda d: d["objects"][0].update(position=[1.15, 0.4, 0.0], yaw_deg=45),
+    # 1 cm left of the shelf's side (its corner at x = 1.001 + 0.389 = 1.39): the shelf's axes part them
+    lambda d: d["objects"][0].update(position=[1.001, 0.85, 0.0], yaw_deg=45),
     lambda d: d["objects"][0].update(limits=[10, 180]),
     lambda d: d["key_frames"].update(decimals=0),
     lambda d: d["render"].update(ambient=0.0),
