@@ -86,7 +86,8 @@ def check_camera_in_free_space(centres: np.ndarray, spec: CaptureSpec, spec_path
             f"{[float(v) for v in spec.room]}: x and y centred on 0, floor at z = 0)",
             "keep the camera path inside the room (camera.radius and camera.height, or camera.waypoints; hand "
             "shake adds camera.jitter.position)")
-    boxes = [(f"objects ({o.name})", o) for o in spec.objects] + [(f"furniture ({f.name})", f) for f in spec.furniture]
+    boxes = [(f"objects[{i}] ({o.name})", o) for i, o in enumerate(spec.objects)]  # named as validate_spec names them
+    boxes += [(f"furniture[{i}] ({f.name})", f) for i, f in enumerate(spec.furniture)]
     for where, box in boxes:
         yaw = np.radians(box.yaw_deg)
         d = centres - np.asarray(box.position, dtype=np.float64)

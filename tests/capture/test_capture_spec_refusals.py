@@ -65,8 +65,8 @@ REFUSED = [
     (lambda d: d["camera"].update(height=2.47), "is outside the room, or within 0.05 m of a wall"),
     (lambda d: d["camera"].update(radius=3.0), "is outside the room"),  # x = 3 sin(57 deg) = 2.5 > 2.0
     # the table spans x -1.5..-0.7, y 0.2..0.8, z 0..0.72; the cabinet x -0.75..-0.15, y 1.25..1.75, z 0..0.9
-    (lambda d: _walk(d, [[-1.4, 0.5, 0.5], [-0.8, 0.5, 0.5]]), "is inside furniture (table)"),
-    (lambda d: _walk(d, [[-0.6, 1.4, 0.5], [-0.3, 1.4, 0.5]]), "is inside objects (cabinet)"),
+    (lambda d: _walk(d, [[-1.4, 0.5, 0.5], [-0.8, 0.5, 0.5]]), "is inside furniture[0] (table)"),
+    (lambda d: _walk(d, [[-0.6, 1.4, 0.5], [-0.3, 1.4, 0.5]]), "is inside objects[0] (cabinet)"),
     (lambda d: d["camera"].update(height=0.03), "is outside the room, or within 0.05 m of a wall, the floor"),
     # the drawer (0.7 wide) at x = 0.1 spans -0.25..0.45, 0.1 m into the cabinet (-0.75..-0.15)
     (lambda d: d["objects"][1].update(position=[0.1, 1.5, 0.0]), "objects[0] (cabinet) and objects[1] (drawer) "
@@ -136,7 +136,7 @@ def _table_turned_by_30_degrees_and_a_still_camera(data: dict, x: float, y: floa
 def test_a_camera_inside_a_turned_box_is_refused(x, y):
     data = _tiny()
     _table_turned_by_30_degrees_and_a_still_camera(data, x, y)
-    with pytest.raises(CaptureSpecError, match=r"is inside furniture \(table\)"):
+    with pytest.raises(CaptureSpecError, match=r"is inside furniture\[0\] \(table\)"):
         spec_from_dict(data, TINY)
 
 
