@@ -228,6 +228,22 @@ def test_a_video_holding_more_frames_than_it_declares_is_read_to_its_end(
     assert code == 0 and read_table(out)["source_index"].tolist() == sorted(SHARP)
 
 
+def test_a_damaged_frame_before_the_declared_end_is_warned_of_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # 20 frames declaring 10, one of them (before the tenth) cut short by an end marker in its middle: the video is
+    # read twice (to its declared end, then over all 20), and the damaged frame is named once, not once a pass
+    data = bytearray(write_video(tmp_path / "whole.avi", make_frames(20, SHARP), fourcc="MJPG").read_bytes())
+    chunk = data.find(b"00dc", data.find(b"movi"))  # the first frame's chunk: 00dc, its size, its JPEG
+    chunk = data.find(b"00dc", chunk + 1)  # the second's
+    size = int.from_bytes(data[chunk + 4:chunk + 8], "little")
+    data[chunk + 8 + size // 2:chunk + 10 + size // 2] = b"\xff\xd9"
+    damaged = tmp_path / "damaged.avi"
+    damaged.write_bytes(avi_declaring(bytes(data), 10))
+    code, err = run_cli(capsys, "--video", str(damaged), "--out", str(tmp_path / "out"))
+    assert code == 0 and "the video holds 20 frames, more than the 10 its header declares" in err
+    assert err.count("damaged.avi: frame 1 (t=0.10 s):") == 1, err
+
+
 def test_bad_options(tmp_path: Path, blur_video: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, err = run_cli(capsys, "--video", str(blur_video), "--out", str(tmp_path / "o"), "--count", "0")
     assert code == 2 and "--count" in err
