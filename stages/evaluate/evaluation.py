@@ -226,7 +226,7 @@ class Evaluator:
                 nominal = np.clip(gt * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
                 rec["psnr_nominal"] = _finite_or_none(psnr(rgb, nominal))
             records.append(rec)
-            kept.append((frame, {k: v for k, v in out.items() if k in ("probs", "language")}))
+            kept.append((frame, self._for_grounding(out)))
             if out_dir is not None and self.config.save_renders:
                 _to_png(out_dir / "renders" / f"{frame.frame_id}.png", rgb)
         cam = self._camera(frames[0])
@@ -403,31 +403,15 @@ class Evaluator:
         truth_masks = self._grounding_masks([f for f, _ in rendered])
         if truth_masks is None:
             return {"status": "skipped: the dataset has no masks and no truth capture was given"}
-        queries = []
-        vocabulary = self.grounder.vocabulary.entries
-        owners: dict[str, set[str]] = {}
-        for entry in vocabulary:
-            for alias in entry.aliases:
-                owners.setdefault(alias.casefold(), set()).add(entry.name)
-        ambiguous: set[str] = set()
-        for i, entry in enumerate(vocabulary):
-            aliases = entry.aliases
-            queries.append({"query": aliases[0], "object": entry.name, "index": i, "kind": "name"})
-            # a synonym two objects share ("cupboard" for both cupboards) names neither: its map cannot match one
-            # object's mask, so the first synonym of this object alone is scored
-            synonyms = [a for a in aliases[1:] if len(owners[a.casefold()]) == 1]
-            ambiguous |= {a for a in aliases[1:] if len(owners[a.casefold()]) > 1}
-            if synonyms:
-                queries.append({"query": synonyms[0], "object": entry.name, "index": i, "kind": "synonym"})
+        queries, ambiguous = self._grounding_queries()
         sources = ["probs"]
         language_note = "the run renders no language embedding"
         if rendered and "language" in rendered[0][1]:
-            run_space = getattr(self.run, "language_encoder", None)
-            if run_space in (None, self.grounder.encoder.name):
+            if self._same_language_space():
                 sources += ["language", "language_objects"]
                 language_note = "computed"
             else:  # queries must live in the embedding space the table was trained in
-                language_note = (f"skipped: run trained with encoder {run_space!r}, "
+                language_note = (f"skipped: run trained with encoder {getattr(self.run, 'language_encoder', None)!r}, "
                                  f"queries use {self.grounder.encoder.name!r}")
         results: dict[str, Any] = {"status": "computed", "threshold": self.config.grounding_threshold,
                                    "sources": sources, "language_source": language_note, "queries": []}
@@ -438,11 +422,9 @@ class Evaluator:
             weights = self.grounder.object_weights(q["query"])
             entries.append(dict(q) | {"object_weights": dict(zip(self.ds.objects, map(float, weights), strict=True))}
                            | {source: {"per_view": [], "frames": []} for source in sources})
-        # views outside, queries inside: a view's embedding is normalised (and decoded) once for all its queries
+        # views outside, queries inside; each view's language maps were made from its embedding when it was rendered
         for (frame, out), masks in tqdm(list(zip(rendered, truth_masks, strict=True)), desc="grounding views",
                                         unit="view", disable=not self.config.progress):
-            unit = self.grounder.unit_language(out["language"]) if "language" in sources else None
-            decoded = self.grounder.probs_from_unit_language(unit) if unit is not None else None
             for q, entry in zip(queries, entries, strict=True):
                 truth = masks[..., q["index"]]
                 if not truth.any():
@@ -451,9 +433,9 @@ class Evaluator:
                     if source == "probs":
                         rel = self.grounder.relevancy_from_probs(out["probs"], q["query"])
                     elif source == "language":
-                        rel = self.grounder.relevancy_from_unit_language(unit, q["query"])
+                        rel = out["language"][q["query"]]
                     else:  # language_objects: the query-independent decoding of this view, weighted by the query
-                        rel = self.grounder.relevancy_from_probs(decoded, q["query"])
+                        rel = self.grounder.relevancy_from_probs(out["language_objects"], q["query"])
                     ious, frames = entry[source]["per_view"], entry[source]["frames"]
                     ious.append(iou(rel > self.config.grounding_threshold, truth))
                     frames.append(frame.frame_id)  # per-view IoUs pair up across methods by (query, frame)
@@ -471,6 +453,50 @@ class Evaluator:
             results[f"miou_{source}"] = summarize(
                 [q[source]["iou"]["mean"] for q in results["queries"] if q[source]["iou"]["mean"] is not None])["mean"]
         return results
+
+    def _grounding_queries(self) -> tuple[list[dict[str, Any]], set[str]]:
+        """The grounding's queries (each object's name and first synonym of its own) and the synonyms objects share."""
+        queries = []
+        vocabulary = self.grounder.vocabulary.entries
+        owners: dict[str, set[str]] = {}
+        for entry in vocabulary:
+            for alias in entry.aliases:
+                owners.setdefault(alias.casefold(), set()).add(entry.name)
+        ambiguous: set[str] = set()
+        for i, entry in enumerate(vocabulary):
+            aliases = entry.aliases
+            queries.append({"query": aliases[0], "object": entry.name, "index": i, "kind": "name"})
+            # a synonym two objects share ("cupboard" for both cupboards) names neither: its map cannot match one
+            # object's mask, so the first synonym of this object alone is scored
+            synonyms = [a for a in aliases[1:] if len(owners[a.casefold()]) == 1]
+            ambiguous |= {a for a in aliases[1:] if len(owners[a.casefold()]) > 1}
+            if synonyms:
+                queries.append({"query": synonyms[0], "object": entry.name, "index": i, "kind": "synonym"})
+        return queries, ambiguous
+
+    def _same_language_space(self) -> bool:
+        """Whether the grounder's queries live in the embedding space the run's language table was trained in."""
+        return getattr(self.run, "language_encoder", None) in (None, self.grounder.encoder.name)
+
+    def _for_grounding(self, out: dict[str, np.ndarray]) -> dict[str, Any]:
+        """What the grounding reads of a held-out render, kept until every held-out and unseen view is rendered: the
+        probabilities and, for a rendered language embedding ``[H, W, D]``, only what the grounding makes of it (its
+        relevancy map per query, and its decoded probabilities). Holding the embeddings themselves cost D = 384
+        floats a pixel, 0.8 GB a 960x540 view: 8 views took the evaluation of a phone video to 12.7 GiB
+        (docs/workflow.md, "A phone-sized capture end to end"). The same maps, made earlier: the same bits."""
+        kept: dict[str, Any] = {k: v for k, v in out.items() if k == "probs"}
+        if "language" not in out:
+            return kept
+        kept["language"] = {}  # the run renders a language embedding (the grounding says so either way)
+        if self.grounder is None or not self._same_language_space():
+            return kept
+        # a view's embedding is normalised (and decoded) once for all its queries
+        unit = self.grounder.unit_language(out["language"])
+        kept["language_objects"] = self.grounder.probs_from_unit_language(unit)
+        for q in self._grounding_queries()[0]:
+            if q["query"] not in kept["language"]:
+                kept["language"][q["query"]] = self.grounder.relevancy_from_unit_language(unit, q["query"])
+        return kept
 
     def _mask_source(self) -> str:
         """Where the object masks come from: "dataset masks", "truth renderer", or "" (nowhere)."""

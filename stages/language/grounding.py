@@ -39,6 +39,8 @@ from .vocabulary import ObjectVocabulary, normalize_phrase
 DEFAULT_THRESHOLD = 0.5
 NAMING_METHODS = ("exact", "partial")
 """Resolutions by which a query names its object in words; misspellings and meanings are weighed by the softmax."""
+UNIT_BLOCK = 16384
+"""Pixels per block of ``Grounder.unit_language`` (16384 x 384 float64: 48 MiB)."""
 
 
 class Grounder:
@@ -123,8 +125,15 @@ class Grounder:
         Normalise once per view and pass the result to the ``*_unit_language`` methods of every query:
         each pass over a 256x192x384 float64 array takes ~0.1 s.
         """
-        lang = np.asarray(language, dtype=np.float64)
-        return lang / np.maximum(np.linalg.norm(lang, axis=-1, keepdims=True), 1e-12)
+        lang = np.asarray(language)
+        out = np.empty(lang.shape, dtype=np.float64)
+        # in blocks of pixels: the float64 copy, its squares and the quotient of a whole 960x540 view were 4.8 GB at
+        # once; each pixel's vector is normalised alone, so the blocks give the same bits
+        flat, flat_out = lang.reshape(-1, lang.shape[-1]), out.reshape(-1, lang.shape[-1])
+        for a in range(0, len(flat), UNIT_BLOCK):
+            block = flat[a:a + UNIT_BLOCK].astype(np.float64)
+            flat_out[a:a + UNIT_BLOCK] = block / np.maximum(np.linalg.norm(block, axis=-1, keepdims=True), 1e-12)
+        return out
 
     def relevancy_from_language(self, language: np.ndarray, query: str) -> np.ndarray:
         """``[H, W]`` LERF relevancy of rendered embeddings ``[H, W, D]`` (renormalised per pixel)."""

@@ -67,3 +67,28 @@ def test_a_name_selects_its_object_even_among_similar_names(encoder):
     probs[0, :, :3] = np.eye(3) * 0.8
     probs[0, :, 3] = 0.2
     np.testing.assert_allclose(grounder.relevancy_from_probs(probs, "middle drawer"), [[0.0, 0.8, 0.0]])
+
+
+def test_unit_language_normalises_each_pixel_in_blocks(monkeypatch):
+    """Each pixel's embedding to unit length in float64 (a zero one stays zero), block by block: the float64 copy,
+    its squares and the quotient of a whole 960x540x384 view had been 4.8 GB at once (docs/language.md)."""
+    import tracemalloc
+
+    import stages.language.grounding as grounding
+
+    monkeypatch.setattr(grounding, "UNIT_BLOCK", 64)
+    lang = np.zeros((64, 64, 384), dtype=np.float32)
+    lang[..., 0], lang[..., 1] = 3.0, 4.0  # |(3, 4)| = 5
+    lang[0, 0] = 0.0
+    tracemalloc.start()
+    try:
+        unit = Grounder.unit_language(lang)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert unit.dtype == np.float64 and unit.shape == (64, 64, 384)
+    assert np.all(unit[..., 0].ravel()[1:] == 0.6) and np.all(unit[..., 1].ravel()[1:] == 0.8)
+    assert not unit[0, 0].any() and not unit[..., 2:].any()
+    # the result (64 x 64 x 384 float64: 12.6 MB) and a few blocks of 64 pixels; the whole-view way held three
+    # arrays of the result's size at once
+    assert peak < 1.5 * unit.nbytes, peak / unit.nbytes
