@@ -99,8 +99,15 @@ class _Selection:
     """Frames identical to the frame before them in the source."""
     last_whole: int = -1
     """Position of the last frame that decoded whole."""
+    blank: list[str] = field(default_factory=list)
+    """Kept frames of (almost) one grey level: a lens cover, a blank screen, a plain wall filling the view."""
     overran: bool = False
     """The source held a frame past the windows' end (a video holding more frames than its header declares)."""
+
+
+BLANK_STD = 2.0
+"""Standard deviation of a kept frame's grey levels (0-255) below which it is called blank: a lens cover or a black
+screen, sensor noise and codec included, stays near 1; a room's view, even a dark one, has tens."""
 
 
 def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: FramesConfig,
@@ -124,6 +131,9 @@ def _select(source: VideoSource | ImageFolderSource, rule: WindowRule, cfg: Fram
         factor = downscale_factor(frame.image.shape[1], frame.image.shape[0], cfg.max_side)
         image = shrink(frame.image, factor) if factor > 1 else frame.image
         _write_png(image_dirs[1] / name, image)
+        grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+        if float(cv2.meanStdDev(grey)[1][0, 0]) < BLANK_STD:
+            picked.blank.append(name)
         for f in cfg.downscale:
             _write_png(image_dirs[f] / name, shrink(image, f))
         # timestamps rounded to the nanosecond: index / fps leaves float noise (0.30000000000000004)
@@ -231,6 +241,11 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
         rows, dropped, all_sharpness, size, n_read = (picked.rows, picked.dropped, picked.sharpness, picked.size,
                                                       picked.n_read)
         kept_repeats = [r["frame"] for r in rows if r.pop("repeat")]
+        if picked.blank:
+            shown = ", ".join(picked.blank[:4]) + (", ..." if len(picked.blank) > 4 else "")
+            _warn(f"{source.path}: {len(picked.blank)} kept frame(s) hold almost one grey level ({shown}): a lens "
+                  "cover, a blank screen or a plain surface filling the view; COLMAP cannot register them (cut them "
+                  "from the video, or film some texture)")
         if picked.repeats:
             _warn(f"{source.path}: {picked.repeats} frames repeat the frame before them exactly (a phone that "
                   "stalled, or a still start or end); a window keeps such a frame only when it has no other"
@@ -272,6 +287,7 @@ def extract_frames(cfg: FramesConfig) -> dict[str, Any]:
             "dropped_frame_count": len(dropped),
             "repeated_frame_count": picked.repeats,
             "kept_repeats": kept_repeats,
+            **({"blank_frames": picked.blank} if picked.blank else {}),  # written only when found (docs/poses.md)
             "skipped_files": [p.name for p in skipped],
             "max_dropped": cfg.max_dropped,
             "dropped": [{k: v for k, v in r.items() if k != "timestamp"} for r in dropped_rows],

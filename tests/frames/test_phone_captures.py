@@ -133,3 +133,23 @@ def test_frame_names_sort_in_frame_order_past_five_digits(tmp_path: Path) -> Non
     assert names == ["frame_099998.png", "frame_099999.png", "frame_100000.png"] == sorted(names)
     assert frame_name(12) == "frame_00012.png"  # the contract's width where the numbers fit
     np.testing.assert_array_equal(cv2.imread(str(out / "images" / names[2])), textured_frame(2))
+
+
+def test_blank_frames_are_named_when_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A lens cover at the start: frame 0 black, frame 1 a dark grey with sensor noise of 1 grey level (standard
+    deviation 1 < 2), then the room's texture (tens of levels); frames.json names the two, a clean folder gets no
+    warning and no key."""
+    folder = photo_folder(tmp_path, [f"IMG_{k}.png" for k in range(5)])
+    cv2.imwrite(str(folder / "IMG_0.png"), np.zeros_like(textured_frame(0)))
+    noise = np.random.default_rng(0).normal(20.0, 1.0, textured_frame(0).shape[:2])
+    cv2.imwrite(str(folder / "IMG_1.png"), np.clip(noise, 0, 255).astype(np.uint8))
+    code, err = run_cli(capsys, "--video", str(folder), "--out", str(tmp_path / "out"))
+    assert code == 0, err
+    names = [frame_name(0), frame_name(1)]
+    assert f"2 kept frame(s) hold almost one grey level ({names[0]}, {names[1]}): a lens cover" in err
+    assert json.loads((tmp_path / "out" / "frames.json").read_text())["blank_frames"] == names
+    (tmp_path / "clean").mkdir()
+    clean = photo_folder(tmp_path / "clean", [f"IMG_{k}.png" for k in range(5)])
+    code, err = run_cli(capsys, "--video", str(clean), "--out", str(tmp_path / "clean_out"))
+    assert code == 0 and "grey level" not in err
+    assert "blank_frames" not in json.loads((tmp_path / "clean_out" / "frames.json").read_text())
