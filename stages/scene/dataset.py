@@ -165,9 +165,13 @@ class SceneDataset:
             raise
 
     def frame_by_id(self, frame_id: str) -> Frame:
-        """The frame whose id (the last ``_`` token of its image name) is ``frame_id``; an unknown id is refused,
-        showing the ids the dataset has (and the id an image name given instead would have)."""
+        """The frame whose id (the last ``_`` token of its image name) is ``frame_id``, or else the one frame whose id
+        is that number padded otherwise (``7`` for ``00007``, as key frames pair); an unknown id is refused, showing
+        the ids the dataset has (and the id an image name given instead would have)."""
         found = next((f for f in self.frames if f.frame_id == frame_id), None)
+        if found is None and frame_id.isdigit():
+            same = [f for f in self.frames if f.frame_id.isdigit() and int(f.frame_id) == int(frame_id)]
+            found = same[0] if len(same) == 1 else None
         if found is None:
             ids = [f.frame_id for f in self.frames]
             own = frame_id_of(frame_id)

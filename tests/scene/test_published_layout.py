@@ -156,3 +156,14 @@ def test_masks_as_downloads_save_them_are_read_or_refused_with_the_fix(tmp_path)
         read_scene(root)
     with pytest.raises(SceneError, match=r"0\.npy -> 00000\.npy"):
         ds.load_mask(frame)
+
+
+def test_a_frame_is_found_by_its_number_padded_otherwise(tmp_path):
+    """`render --pose DS:7`, `control --frame 7`: the one frame whose id is 7 padded otherwise (00007), as key frames
+    pair with frames; an id no frame has, by any padding, is refused with the ids there are."""
+    ds = hand_built_dataset(tmp_path / "ds", n_frames=8)
+    assert [f.frame_id for f in ds.frames][:2] == ["00000", "00001"]
+    assert ds.frame_by_id("00007").frame_id == "00007"
+    assert ds.frame_by_id("7").frame_id == "00007" and ds.frame_by_id("0007").frame_id == "00007"
+    with pytest.raises(SceneError, match=r"no frame with id '8'.*pick one of the dataset's frame ids: 00000"):
+        ds.frame_by_id("8")
