@@ -21,6 +21,7 @@ from .frame_list import check_name_order, read_frame_list, time_order
 from .model_export import drop_frames, judge_camera_path, registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
+    blank_frames_note,
     check_motion,
     check_precheck,
     check_registration,
@@ -99,6 +100,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         registered = set(registered_poses(rec)) if rec is not None else set()
         detail, advice = registration_detail(rec, sfm, pre, cfg, keypoints,
                                              None if mask_stats is None else mask_stats.mean_excluded_fraction)
+        detail += blank_frames_note(cfg.frames_dir, [n for n in ordered if n not in registered])
         # even with --min-registered 0 a model needs two posed frames to be a model at all
         min_fraction = max(cfg.min_registered, 2 / len(names))
         check_registration(names, registered, min_fraction, cfg.frames_dir, detail, advice)

@@ -241,6 +241,21 @@ def _mostly_still_fix(judged: TrajectoryJudgement, moving: list[str], pre: Motio
     return fix
 
 
+def blank_frames_note(frames_dir: Path, unregistered: list[str]) -> str:
+    """What a registration error adds when some frames it could not pose are ones `livescene frames` found blank
+    (frames.json ``blank_frames``: almost one grey level, a lens cover): their cause is the frames, not the matching."""
+    summary = frames_dir / "frames.json"
+    try:
+        blank = set(json.loads(summary.read_text()).get("blank_frames") or []) if summary.is_file() else set()
+    except (OSError, ValueError, AttributeError):  # not this stage's business to refuse a damaged frames.json
+        return ""
+    hit = [n for n in unregistered if n in blank]
+    if not hit:
+        return ""
+    return (f" ({len(hit)} of them hold almost one grey level, as `livescene frames` warned: {compact_names(hit)}; "
+            "a lens cover or a blank screen has nothing to match: cut them from the video)")
+
+
 def check_registration(names: list[str], registered: set[str], min_fraction: float, frames_dir: Path,
                        detail: str = "", advice: str = "") -> float:
     """The registered fraction; raise PoseQualityError listing unregistered frames when it is too low."""

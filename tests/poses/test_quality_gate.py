@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from stages.poses import PosesConfig, StaticCameraError, estimate_poses, pipelin
 from stages.poses.cli import main
 from stages.poses.pipeline import registration_detail
 from stages.poses.quality_gate import (
+    blank_frames_note,
     compact_names,
     intrinsics_warnings,
     registration_advice,
@@ -55,11 +57,14 @@ def test_unregistered_frames_are_listed_with_advice(tmp_path: Path, capsys: pyte
     write_sequence(other, orbit_poses(4, arc_deg=20), source_indices=[8, 9, 10, 11], seed=7)
     for png in (other / "images").iterdir():
         shutil.copy(png, frames / "images" / png.name)
+    # the frames stage found two of them blank (the note names those, not every unregistered frame)
+    (frames / "frames.json").write_text(json.dumps({"blank_frames": ["frame_00009.png", "frame_00010.png"]}))
     out = tmp_path / "poses"
     code = main(["--frames", str(frames), "--out", str(out), "--threads", "2", "--seed", "0", "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2, err
     assert err.startswith(f"error: {frames}: only 8 of 12 frames (67%) received a pose, below the required 80%")
+    assert "(2 of them hold almost one grey level, as `livescene frames` warned: frame_00009..frame_00010 (2);" in err
     assert "unregistered frames: frame_00008..frame_00011 (4)" in err
     # 12 frames: auto matching was already exhaustive, so the advice must not suggest it again (issue 17)
     assert "--matcher exhaustive" not in err and "overlap" in err and "sharper frames" in err
@@ -160,3 +165,13 @@ def test_a_run_that_passes_with_several_models_warns_with_the_frames_it_leaves_o
     assert "broke into 2 separate models" in line
     assert "the 3 frame(s) it does not pose (of the other models, or of none) are left out" in line
     assert "frame_00007..frame_00009 (3)" in line and line.endswith("To keep them, try X")
+
+
+def test_the_blank_frames_note_reads_frames_json_and_names_only_unregistered_blank_ones(tmp_path: Path) -> None:
+    assert blank_frames_note(tmp_path, ["frame_00001.png"]) == ""  # a plain folder: no frames.json
+    (tmp_path / "frames.json").write_text(json.dumps({"blank_frames": ["frame_00001.png", "frame_00002.png"]}))
+    assert blank_frames_note(tmp_path, ["frame_00003.png"]) == ""  # the blank frames registered
+    assert blank_frames_note(tmp_path, ["frame_00002.png", "frame_00003.png"]).startswith(
+        " (1 of them hold almost one grey level, as `livescene frames` warned: frame_00002;")
+    (tmp_path / "frames.json").write_text("{not json")
+    assert blank_frames_note(tmp_path, ["frame_00002.png"]) == ""
