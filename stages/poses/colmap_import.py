@@ -12,7 +12,6 @@ the frame with the same number (frame id = last ``_`` token of the stem, as ever
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +25,7 @@ from stages.scene import InputError, atomic_dir, frame_number_of, write_json
 
 from .colmap_files import binary_file_problem, text_file_problem
 from .errors import PoseQualityError
-from .frame_list import IMAGE_SUFFIXES, read_frame_list, time_order
+from .frame_list import frames_summary, image_names, read_frame_list, time_order
 from .model_export import (
     SUPPORTED_CAMERA_MODELS,
     drop_frames,
@@ -275,10 +274,10 @@ def match_images(rec: pycolmap.Reconstruction, image_dir: Path) -> Matched:
     missing = [n for n in posed if not (image_dir / n).is_file()]
     if missing:
         raise InputError(image_dir, f"{len(missing)} of the {len(posed)} posed COLMAP images are not in this folder, "
-                         f"e.g. {missing[:3]} (the folder holds e.g. {_folder_images(image_dir)[:3]})",
+                         f"e.g. {missing[:3]} (the folder holds e.g. {image_names(image_dir)[:3]})",
                          "pass the folder the model was made from (COLMAP's image path: the image names of the model "
                          "are paths inside it)")
-    names = sorted(set(_folder_images(image_dir)) | {im.name for im in rec.images.values()})
+    names = sorted(set(image_names(image_dir)) | {im.name for im in rec.images.values()})
     return Matched({n: n for n in posed}, names, {n: _frame_number(n) for n in names}, image_dir, [])
 
 
@@ -287,19 +286,6 @@ IMPORT_BROKEN_FIX = ("COLMAP's model holds cameras that no continuous path joins
                      "images")
 
 
-def _frames_source_kind(frames_dir: Path) -> str | None:
-    """``source_kind`` of frames.json (video or images), when the folder has one."""
-    try:
-        return json.loads((frames_dir / "frames.json").read_text()).get("source_kind")
-    except (OSError, ValueError, AttributeError):
-        return None
-
-
-def _folder_images(images_dir: Path) -> list[str]:
-    """Image files directly in ``images_dir`` (not below: a folder may hold downscaled copies in images_2/); hidden
-    files (macOS's ``._`` copies) left out, as the frames stage leaves them out."""
-    return sorted(p.name for p in images_dir.iterdir()
-                  if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
 
 
 def import_model(cfg: ImportConfig) -> dict[str, Any]:
@@ -360,7 +346,7 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
             warnings_.append(f"{len(extra)} posed model image(s) match no frame and are left out: "
                              f"{compact_names(extra)}")
         if cfg.frames_dir is not None and any(c != f for c, f in mapping.items()) and \
-                _frames_source_kind(cfg.frames_dir) == "video":
+                frames_summary(cfg.frames_dir).get("source_kind") == "video":
             warnings_.append("the frames come from a video, numbered by decode position from 0; a model made from "
                              "other frames of it (ns-process-data numbers from 1 and subsamples) pairs by number "
                              "only by chance: make the model from FRAMES/images, or check with `livescene poses "

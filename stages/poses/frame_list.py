@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +13,23 @@ from stages.scene import InputError, frame_number_of
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 FRAMES_FIRST = "run `livescene frames --video FOLDER --out FRAMES` first and pass FRAMES"
+
+
+def image_names(folder: Path) -> list[str]:
+    """Image files directly in ``folder``, sorted; hidden files are no frames, as in the frames stage: macOS leaves
+    ``._IMG_0001.jpg`` (its metadata) beside every photo it copies to a foreign disk, named like the photo."""
+    return sorted(p.name for p in Path(folder).iterdir()
+                  if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file() and not p.name.startswith("."))
+
+
+def frames_summary(frames_dir: Path) -> dict:
+    """frames.json of a FRAMES folder; empty for a plain image folder, or one whose frames.json does not read as a
+    mapping (what it would add is advice, not this stage's business to refuse)."""
+    try:
+        info = json.loads((Path(frames_dir) / "frames.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return info if isinstance(info, dict) else {}
 
 
 @dataclass
@@ -32,10 +50,7 @@ def read_frame_list(frames_dir: Path) -> FrameList:
     if not frames_dir.is_dir():
         raise InputError(frames_dir, "frames folder not found", "run `livescene frames` first or fix the path")
     image_dir = frames_dir / "images" if (frames_dir / "images").is_dir() else frames_dir
-    # hidden files are no frames, as in the frames stage: macOS leaves ``._IMG_0001.jpg`` (its metadata) beside every
-    # photo it copies to a foreign disk, named like the photo
-    names = sorted(p.name for p in image_dir.iterdir()
-                   if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file() and not p.name.startswith("."))
+    names = image_names(image_dir)
     if not names:
         others = sorted({p.suffix.lower() for p in image_dir.iterdir() if p.is_file() and p.suffix})
         raise InputError(image_dir, f"no images ({', '.join(IMAGE_SUFFIXES)}) found"

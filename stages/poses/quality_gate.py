@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 from pathlib import Path
@@ -12,6 +11,7 @@ from stages.scene import frame_id_of
 from .camera_motion import FeatureMotion
 from .config import PosesConfig
 from .errors import DegenerateTrajectoryError, PoseQualityError, StaticCameraError
+from .frame_list import frames_summary
 from .static_check import MotionPrecheck
 from .trajectory_check import TrajectoryJudgement, TrajectorySettings
 
@@ -30,11 +30,10 @@ first (too little texture, or masks over most of the view), not to the matching 
 
 def frames_all_kept(frames_dir: Path) -> bool:
     """Whether `livescene frames` already kept every source frame (then a smaller --stride is no fix)."""
-    path = Path(frames_dir) / "frames.json"
+    info = frames_summary(frames_dir)
     try:
-        info = json.loads(path.read_text())
         return int(info["n_frames"]) >= int(info["decoded_frame_count"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError):
         return False
 
 
@@ -244,11 +243,7 @@ def _mostly_still_fix(judged: TrajectoryJudgement, moving: list[str], pre: Motio
 def blank_frames_note(frames_dir: Path, unregistered: list[str]) -> str:
     """What a registration error adds when some frames it could not pose are ones `livescene frames` found blank
     (frames.json ``blank_frames``: almost one grey level, a lens cover): their cause is the frames, not the matching."""
-    summary = frames_dir / "frames.json"
-    try:
-        blank = set(json.loads(summary.read_text()).get("blank_frames") or []) if summary.is_file() else set()
-    except (OSError, ValueError, AttributeError):  # not this stage's business to refuse a damaged frames.json
-        return ""
+    blank = frames_summary(frames_dir).get("blank_frames") or []
     hit = [n for n in unregistered if n in blank]
     if not hit:
         return ""
