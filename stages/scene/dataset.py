@@ -169,9 +169,11 @@ class SceneDataset:
         is that number padded otherwise (``7`` for ``00007``, as key frames pair); an unknown id is refused, showing
         the ids the dataset has (and the id an image name given instead would have)."""
         found = next((f for f in self.frames if f.frame_id == frame_id), None)
-        if found is None and frame_id.isdigit():
-            same = [f for f in self.frames if f.frame_id.isdigit() and int(f.frame_id) == int(frame_id)]
-            found = same[0] if len(same) == 1 else None
+        if found is None and frame_id.isdigit():  # a number: paired as a key frame is (an image name stays refused)
+            from .key_frame_states import match_key_frames  # imports this module
+
+            matched, _ = match_key_frames([frame_id], self.frames)
+            found = self.frames[matched[frame_id]] if frame_id in matched else None
         if found is None:
             ids = [f.frame_id for f in self.frames]
             own = frame_id_of(frame_id)
