@@ -325,11 +325,10 @@ def _no_overlaps(spec: CaptureSpec, path: Path) -> None:
     """An object's carcass must not interpenetrate another carcass or a piece of furniture: the masks would give the
     shared space to whichever box the renderer meets first, and a door or drawer would open through the other box.
     Pieces of furniture may overlap each other (an L-shaped counter of two boxes): both are background."""
-    boxes = [(f"objects[{i}] ({o.name})", (o.position, o.size, o.yaw_deg)) for i, o in enumerate(spec.objects)]
-    boxes += [(f"furniture[{i}] ({f.name})", (f.position, f.size, f.yaw_deg)) for i, f in enumerate(spec.furniture)]
-    for (name_a, a), (name_b, b) in itertools.combinations(boxes, 2):
-        if name_a.startswith("furniture[") and name_b.startswith("furniture["):
-            continue
+    objects = [(f"objects[{i}] ({o.name})", (o.position, o.size, o.yaw_deg)) for i, o in enumerate(spec.objects)]
+    furniture = [(f"furniture[{i}] ({f.name})", (f.position, f.size, f.yaw_deg)) for i, f in enumerate(spec.furniture)]
+    pairs = [*itertools.combinations(objects, 2), *itertools.product(objects, furniture)]
+    for (name_a, a), (name_b, b) in pairs:
         depth = _penetration(a, b)
         if depth > OVERLAP_TOLERANCE_M:
             raise CaptureSpecError(path, f"{name_a} and {name_b} overlap by {depth:.3g} m",
