@@ -204,7 +204,7 @@ def _run_dataset(argv: list[str]) -> int:
     return 0
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     run = {"render": _run_render, "dataset": _run_dataset}.get(argv[0] if argv else "")

@@ -49,7 +49,7 @@ def build_parser(prog: str = "livescene dataset") -> argparse.ArgumentParser:
     return parser
 
 
-@cli_errors(ValueError)
+@cli_errors(ValueError, sigterm=True)
 def assemble(args: argparse.Namespace) -> int:
     config = AssembleConfig(frames=args.frames, poses=args.poses, out=args.out, labels=args.labels,
                             states=args.states, prompts=args.prompts, split=args.split, split_n=args.split_n,
@@ -62,7 +62,7 @@ def assemble(args: argparse.Namespace) -> int:
     return 0
 
 
-@cli_errors(ValueError)
+@cli_errors(ValueError)  # its triangulation is one long COLMAP call, which a SIGTERM handler would wait for
 def orient(args: argparse.Namespace) -> int:
     from .orient import orient_dataset  # imported on use: it loads open3d and pycolmap
 

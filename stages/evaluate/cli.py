@@ -59,7 +59,7 @@ def build_parser(prog: str = "livescene evaluate") -> argparse.ArgumentParser:
     return p
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     return _evaluate(build_parser().parse_args(argv))
 

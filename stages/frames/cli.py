@@ -44,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.count is not None and args.count < 1:

@@ -30,7 +30,7 @@ def build_parser(prog: str = "livescene labels") -> argparse.ArgumentParser:
     return p
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     config = LabelsConfig(input=args.input, frames=args.frames, out=args.out, format=args.format,

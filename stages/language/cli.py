@@ -172,7 +172,7 @@ def _relevancy(args: argparse.Namespace) -> int:
     return 0
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     return {"targets": _targets, "query": _query, "relevancy": _relevancy}[args.command](args)

@@ -59,7 +59,7 @@ def _beyond_training(ds: SceneDataset, states: dict[str, float]) -> dict[str, di
     return out
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     return _control(build_parser().parse_args(argv))
 

@@ -62,7 +62,7 @@ def build_parser(prog: str = "livescene report") -> argparse.ArgumentParser:
     return parser
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     return {"sweep": _sweep, "scene": _scene, "index": _index}[args.command](args)

@@ -33,7 +33,7 @@ def build_parser(prog: str = "livescene scene") -> argparse.ArgumentParser:
     return parser
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "assemble":  # `livescene scene assemble` is routed to the dataset stage by stages.cli

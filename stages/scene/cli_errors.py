@@ -133,6 +133,7 @@ def cli_errors(*also: type[Exception] | ErrorExit,
                       file=sys.stderr)
                 return EXIT_USER_ERROR
 
+        run.unwinds_sigterm = sigterm  # type: ignore[attr-defined]  # read by a test over every command
         return run
 
     return wrap

@@ -62,7 +62,7 @@ def parse_ranges(items: list[str]) -> dict[str, tuple[float, float]]:
     return out
 
 
-@cli_errors()
+@cli_errors(sigterm=True)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     method, per_object = parse_methods(args.method)
