@@ -42,6 +42,14 @@ def _estimate_parser() -> argparse.ArgumentParser:
                    choices=["SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"],
                    help="COLMAP camera model shared by all frames (default %(default)s, chosen by measurement: "
                         "docs/poses.md, Camera model)")
+    p.add_argument("--focal", type=float,
+                   help="known focal length in pixels of the frames as written: COLMAP starts from it and keeps it "
+                        "(principal point at the centre; docs/poses.md, Known focal length)")
+    p.add_argument("--focal-35mm", type=float,
+                   help="known 35 mm-equivalent focal length in mm (a phone's spec sheet), converted by the image "
+                        "diagonal (43.27 mm for full frame)")
+    p.add_argument("--refine-focal", action="store_true",
+                   help="let bundle adjustment refine the given focal length (default: kept fixed)")
     p.add_argument("--max-image-size", type=int, default=d.max_image_size,
                    help="longest side for feature extraction (-1 = full)")
     p.add_argument("--max-features", type=int, default=d.max_num_features, help="SIFT features per frame")
@@ -104,7 +112,8 @@ def _estimate(argv: list[str]) -> int:
                       sequential_overlap=a.overlap, vocab_tree=a.vocab_tree, threads=a.threads, seed=a.seed,
                       deterministic=not a.parallel_extraction,
                       min_registered=a.min_registered, max_still_share=a.max_still_share,
-                      camera_model=a.camera_model, max_image_size=a.max_image_size,
+                      camera_model=a.camera_model, focal_px=a.focal, focal_35mm=a.focal_35mm,
+                      refine_focal=a.refine_focal, max_image_size=a.max_image_size,
                       max_num_features=a.max_features, mask_dilate_px=a.mask_dilate, keep_database=a.keep_database,
                       orient=not a.no_orient,
                       progress=not a.no_progress, verbose=a.verbose)

@@ -44,6 +44,12 @@ class PosesConfig:
     RADIAL (one focal length, k1, k2) by measurement: on a real 50-image phone capture its focal error was
     0.05% against SIMPLE_RADIAL's 0.71%, and OPENCV's free fy and tangential terms drifted on the synthetic
     demo (fy 1.8% off, rotation error doubled); docs/poses.md "Camera model"."""
+    focal_px: float | None = None
+    """A known focal length in pixels of the frames as written (``--focal``); None = estimated by COLMAP."""
+    focal_35mm: float | None = None
+    """A known 35 mm-equivalent focal length in millimetres (``--focal-35mm``), converted by the image diagonal."""
+    refine_focal: bool = False
+    """Let bundle adjustment refine a given focal length (default: kept as given; known_focal.py)."""
     max_image_size: int = 1600
     """Frames are downscaled to this longest side for feature extraction (-1 = full size)."""
     max_num_features: int = 8192

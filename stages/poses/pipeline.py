@@ -18,6 +18,7 @@ from .camera_motion import FeatureMotion, feature_motion, keypoint_counts
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
 from .frame_list import check_name_order, read_frame_list, time_order
+from .known_focal import known_focal
 from .model_export import drop_frames, judge_camera_path, registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
@@ -60,6 +61,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
     if first is None:
         raise InputError(frames.image_dir / names[0], "image unreadable", "re-extract the frames")
     diagonal = float(np.hypot(*first.shape))
+    focal = known_focal(cfg.focal_px, cfg.focal_35mm, cfg.refine_focal, first.shape[1], first.shape[0],
+                        cfg.frames_dir)
     ordered, times = time_order(frames.names, frames.source_index)
     check_name_order(frames, ordered, resolve_matcher(cfg, len(names)))
     # a still camera is refused here in seconds, not after minutes of COLMAP (docs/poses.md, Quality gate)
@@ -93,7 +96,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
             mask_stats = write_colmap_masks(frames.image_dir, names, cfg.masks_dir, mask_dir, cfg.mask_dilate_px)
             timings["masks"] = time.perf_counter() - t0
         database = work / "database.db"
-        sfm = run_sfm(cfg, database, frames.image_dir, names, mask_dir, work / "models", after_matching)
+        sfm = run_sfm(cfg, database, frames.image_dir, names, mask_dir, work / "models", after_matching, focal)
         timings.update(sfm.timings)
         motion = motion_holder["motion"]
         rec = sfm.reconstruction
@@ -123,6 +126,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         frame = orient_reconstruction(rec) if cfg.orient else None
         # file_path relative to the final folder (not the atomic temp one): ns-train --data POSES resolves it
         transforms = transforms_dict(rec, frames.source_index, image_dir=frames.image_dir, out_dir=cfg.out_dir)
+        if focal is not None:  # only then: a run without one writes what it always wrote
+            transforms["focal_given"] = focal.as_dict()
         warnings_ += intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
         write_model_outputs(out, rec, transforms, "livescene poses", None if frame is None else frame.as_dict())
         if cfg.keep_database:
@@ -148,7 +153,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
             "n_models": sfm.n_models,
             "matcher": sfm.matcher,
             "camera": {"model": next(iter(rec.cameras.values())).model.name,
-                       "params": [float(p) for p in next(iter(rec.cameras.values())).params]},
+                       "params": [float(p) for p in next(iter(rec.cameras.values())).params],
+                       **({} if focal is None else {"focal_given": focal.as_dict()})},
             "feature_motion": motion.as_dict(),
             "motion_precheck": pre.as_dict(),
             "trajectory": judged.as_dict(),

@@ -16,6 +16,7 @@ import cv2  # noqa: F401  (must load before pycolmap: the reverse order crashes 
 import pycolmap
 
 from .config import PosesConfig
+from .known_focal import KnownFocal
 
 
 @dataclass
@@ -59,9 +60,13 @@ def worker_threads(cfg: PosesConfig) -> int:
 
 
 def extract_features(cfg: PosesConfig, database: Path, image_dir: Path, names: list[str],
-                     mask_dir: Path | None) -> None:
-    """SIFT on every frame into ``database``; one shared camera (the frames come from one video)."""
+                     mask_dir: Path | None, focal: KnownFocal | None = None) -> None:
+    """SIFT on every frame into ``database``; one shared camera (the frames come from one video), starting from a
+    known focal length when one is given (COLMAP's ``--ImageReader.camera_params``: the camera then has a prior
+    focal length, which the mapper uses rather than estimating one)."""
     reader = pycolmap.ImageReaderOptions(camera_model=cfg.camera_model)
+    if focal is not None:
+        reader.camera_params = focal.camera_params(cfg.camera_model)
     if mask_dir is not None:
         reader.mask_path = str(mask_dir)
     extraction = pycolmap.FeatureExtractionOptions(num_threads=worker_threads(cfg), max_image_size=cfg.max_image_size,
@@ -92,8 +97,9 @@ def match_features(cfg: PosesConfig, database: Path, matcher: str) -> None:
 
 
 def map_incrementally(cfg: PosesConfig, database: Path, image_dir: Path, models_dir: Path,
-                      n_images: int) -> dict[int, pycolmap.Reconstruction]:
-    """Incremental mapping with a fixed seed and thread count; returns every model built."""
+                      n_images: int, focal: KnownFocal | None = None) -> dict[int, pycolmap.Reconstruction]:
+    """Incremental mapping with a fixed seed and thread count; returns every model built. A known focal length is
+    kept as given by bundle adjustment and image registration unless ``focal.refine``."""
     options = pycolmap.IncrementalPipelineOptions(num_threads=worker_threads(cfg), random_seed=cfg.seed,
                                                   multiple_models=True,
                                                   # short sequences still get a model the gate can judge
@@ -101,6 +107,9 @@ def map_incrementally(cfg: PosesConfig, database: Path, image_dir: Path, models_
     options.mapper.num_threads = worker_threads(cfg)
     options.mapper.random_seed = cfg.seed
     options.triangulation.random_seed = cfg.seed
+    if focal is not None and not focal.refine:
+        options.ba_refine_focal_length = False
+        options.mapper.abs_pose_refine_focal_length = False
     models_dir.mkdir(parents=True, exist_ok=True)
     return pycolmap.incremental_mapping(database_path=database, image_path=image_dir, output_path=models_dir,
                                         options=options)
@@ -114,7 +123,7 @@ def largest_model(models: dict[int, pycolmap.Reconstruction]) -> pycolmap.Recons
 
 
 def run_sfm(cfg: PosesConfig, database: Path, image_dir: Path, names: list[str], mask_dir: Path | None,
-            models_dir: Path, after_matching: object = None) -> SfmResult:
+            models_dir: Path, after_matching: object = None, focal: KnownFocal | None = None) -> SfmResult:
     """Extract, match, (check motion via ``after_matching(database)``), then map.
 
     ``after_matching`` lets the caller reject a static camera before the
@@ -130,7 +139,7 @@ def run_sfm(cfg: PosesConfig, database: Path, image_dir: Path, names: list[str],
                                              disable=not cfg.progress) as bar:
         t0 = time.perf_counter()
         bar.set_postfix_str(f"SIFT on {len(names)} frames")
-        extract_features(cfg, database, image_dir, names, mask_dir)
+        extract_features(cfg, database, image_dir, names, mask_dir, focal)
         timings["extract"] = time.perf_counter() - t0
         bar.update()
         t0 = time.perf_counter()
@@ -142,7 +151,7 @@ def run_sfm(cfg: PosesConfig, database: Path, image_dir: Path, names: list[str],
             after_matching(database)
         t0 = time.perf_counter()
         bar.set_postfix_str("incremental mapping")
-        models = map_incrementally(cfg, database, image_dir, models_dir, len(names))
+        models = map_incrementally(cfg, database, image_dir, models_dir, len(names), focal)
         timings["map"] = time.perf_counter() - t0
         bar.update()
     sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)

@@ -680,3 +680,32 @@ def test_a_quoted_number_of_a_config_file_stays_an_error(workflow_copy):
     assert "--config" not in run.output.split("invalid workflow config in")[1].splitlines()[0]  # none was given
     run = workflow_copy.snakemake("-n", "--cores", "1", "--config", "train={steps: true}")
     assert run.code != 0 and "key 'train.steps'" in run.output
+
+
+def test_camera_column_gives_colmap_the_focal_length(workflow_copy, tmp_path):
+    """A known focal length (sheet column `camera`) reaches the poses command; a row without one keeps the command
+    it had (so it reruns nothing), and the column is refused where COLMAP does not run or when not positive."""
+    video = tmp_path / "room.mp4"
+    video.write_bytes(b"")  # a dry run only needs the paths to exist
+    row = {"source": "video", "path": video, "poses": "estimate", "masks": "no", "key_frames": "no", "names": "no",
+           "truth": "no", "methods": "mk-planes"}
+    workflow_copy.write_scenes([{"scene": "phone", "camera": "focal35=26", **row},
+                                {"scene": "known", "camera": "focal=1375.5,refine", **row},
+                                {"scene": "plain", **row}])
+    plan = workflow_copy.dry_run()
+    assert "--max-features 4096 --no-progress" in plan.scene_jobs("plain")["poses"][0]
+    assert " --focal" not in plan.scene_jobs("plain")["poses"][0]
+    assert "--focal-35mm 26 --threads 1" in plan.scene_jobs("phone")["poses"][0]
+    assert "--focal 1375.5 --refine-focal --threads 1" in plan.scene_jobs("known")["poses"][0]
+    ready = tmp_path / "ready"
+    ready.mkdir()
+    workflow_copy.write_scenes([{"scene": "ready", "source": "dataset", "path": ready, "poses": "given",
+                                 "camera": "focal=500"},
+                                {"scene": "zero", "camera": "focal35=0", **row},
+                                {"scene": "typo", "camera": "focal=26mm", **row}])
+    run = workflow_copy.snakemake("-n", "--cores", "1")
+    assert run.code != 0
+    assert "line 2 (scene 'ready'): column 'camera': 'focal=500' is a focal length for COLMAP, which runs only " \
+        "for poses 'estimate'" in run.output
+    assert "line 3 (scene 'zero'): column 'camera': 'focal35=0' is not a positive focal length" in run.output
+    assert "line 4 (scene 'typo'): key 'camera'" in run.output

@@ -14,7 +14,7 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 COLUMNS = ["scene", "source", "path", "poses", "masks", "key_frames", "names", "prompts", "truth", "methods",
-           "state_ranges"]
+           "state_ranges", "camera"]
 
 
 @dataclass

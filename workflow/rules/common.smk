@@ -203,6 +203,19 @@ def poses_masks(wildcards):
     return f"--masks {q(files['masks'])}" if "masks" in files else ""
 
 
+def poses_args(wildcards):
+    """The masks of ``poses_masks`` and the sheet's known focal length (column ``camera``: focal=PX or focal35=MM,
+    ',refine' to let COLMAP refine it). One param, so that the shell text of a row without one stays as it was."""
+    args = poses_masks(wildcards)
+    camera = row(wildcards.scene).get("camera", "")
+    if camera:
+        kind, _, value = camera.partition("=")
+        value, _, refine = value.partition(",")
+        flag = "--focal" if kind == "focal" else "--focal-35mm"
+        args += f" {flag} {value}" + (" --refine-focal" if refine else "")
+    return args
+
+
 def assemble_input(wildcards):
     scene = wildcards.scene
     files = {"frames": R(scene, "frames"), "poses": R(scene, "poses")}

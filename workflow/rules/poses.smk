@@ -17,7 +17,7 @@ rule poses:
         bench_path("poses")
     params:
         cli=LIVESCENE,
-        masks=poses_masks,
+        masks=poses_args,  # the masks, and the sheet's camera column when set
         seed=config["seed"],
         matcher=config["poses"]["matcher"],
         features=config["poses"]["max_features"],

@@ -167,6 +167,13 @@ def _row_problems(record):
         problems.append("column 'state_ranges': only key frames that the states stage interpolates are normalised "
                         "(a video, image-folder or synthetic source with key frames and estimated or imported poses); "
                         "fix: leave it empty for this row")
+    camera = record.get("camera", "")
+    if camera and poses != "estimate":
+        problems.append(f"column 'camera': {camera!r} is a focal length for COLMAP, which runs only for poses "
+                        f"'estimate' (here {poses!r}); fix: leave it empty for this row")
+    elif camera and not float(camera.split("=", 1)[1].split(",")[0]) > 0:
+        problems.append(f"column 'camera': {camera!r} is not a positive focal length; fix: write e.g. focal35=26 "
+                        "(35 mm-equivalent millimetres) or focal=1375 (pixels of the frames), or leave it empty")
     problems += _item_problems(record, kind, poses)
     truth = record.get("truth", "no")
     if truth == "yes" and kind != "synthetic":

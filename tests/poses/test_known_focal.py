@@ -1,0 +1,84 @@
+"""A known focal length (`livescene poses --focal` / `--focal-35mm`): converted, checked, given to COLMAP and kept."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stages.poses import PosesConfig, estimate_poses
+from stages.poses.cli import main
+from stages.poses.known_focal import known_focal
+from stages.scene import Camera, InputError
+
+Room = tuple[Path, Path, Camera, list[np.ndarray]]
+
+
+def test_35mm_equivalent_is_converted_by_the_image_diagonal() -> None:
+    # 4000x3000 frames have a diagonal of 5000 px; 26 mm of a 43.27 mm full-frame diagonal is 26 / 43.27 of it
+    focal = known_focal(None, 26.0, False, 4000, 3000, Path("frames"))
+    assert focal is not None and focal.focal_px == pytest.approx(3004.3910, abs=1e-3)
+    assert focal.given == "--focal-35mm 26" and not focal.refine
+    # the same lens on frames shrunk to a quarter: a quarter of the pixels
+    quarter = known_focal(None, 26.0, False, 1000, 750, Path("frames"))
+    assert quarter is not None and quarter.focal_px == pytest.approx(751.0978, abs=1e-3)
+
+
+def test_pixels_are_taken_as_given_with_the_principal_point_at_the_centre() -> None:
+    focal = known_focal(110.0, None, True, 160, 120, Path("frames"))
+    assert focal is not None and focal.focal_px == 110.0 and focal.refine
+    assert focal.camera_params("RADIAL") == "110.0,80.0,60.0,0.0,0.0"  # f, cx, cy, k1, k2
+    assert focal.camera_params("SIMPLE_PINHOLE") == "110.0,80.0,60.0"
+    assert focal.camera_params("OPENCV") == "110.0,110.0,80.0,60.0,0.0,0.0,0.0,0.0"
+    # the diagonal of 160x120 is 200 px: 100 px each side of the centre at 110 px, atan(100 / 110) = 42.27 deg
+    assert focal.as_dict()["diagonal_fov_deg"] == pytest.approx(84.55, abs=0.01)
+    assert known_focal(None, None, False, 160, 120, Path("frames")) is None
+
+
+@pytest.mark.parametrize(
+    ("px", "mm", "refine", "words"),
+    [
+        (100.0, 26.0, False, "both --focal 100 and --focal-35mm 26"),
+        (0.0, None, False, "0 is not a positive focal length"),
+        (None, -26.0, False, "-26 is not a positive focal length"),
+        (None, None, True, "--refine-focal without a focal length"),
+        (5.0, None, False, "diagonal field of view of 174.3 degrees"),  # 2 * atan(100 / 5)
+        (1e5, None, False, "diagonal field of view of 0.1 degrees"),
+        (None, 2.0, False, "diagonal field of view of 169.4 degrees"),  # 2 * atan(21.635 / 2)
+    ],
+)
+def test_contradictions_and_absurd_values_are_refused(
+    px: float | None, mm: float | None, refine: bool, words: str
+) -> None:
+    with pytest.raises(InputError, match="fix: ") as info:
+        known_focal(px, mm, refine, 160, 120, Path("frames"))
+    assert words in str(info.value)
+
+
+def test_cli_refuses_before_anything_is_written(
+    room_sequence: Room, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    root = room_sequence[0]
+    out = tmp_path / "poses"
+    assert main(["--frames", str(root), "--out", str(out), "--focal", "3", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--focal 3 px gives the 160x120 frames a diagonal field of view of 176.6 degrees" in err
+    assert "pixels of the frames as written" in err and not out.exists()
+
+
+def test_a_given_focal_is_kept_and_recorded(room_sequence: Room, tmp_path: Path) -> None:
+    """The rendered room's focal is 100 px; given 104 px (4 % off), COLMAP keeps it exactly (with the poses and
+    distortion fitted around it) and both outputs say it was given."""
+    root, masks, _camera, _poses = room_sequence
+    out = tmp_path / "poses"
+    summary = estimate_poses(
+        PosesConfig(frames_dir=root, out_dir=out, masks_dir=masks, threads=2, seed=0, focal_px=104.0, progress=False)
+    )
+    transforms = json.loads((out / "transforms.json").read_text())
+    assert transforms["fl_x"] == 104.0 and transforms["cx"] == 80.0 and transforms["cy"] == 60.0
+    assert transforms["focal_given"]["focal_px"] == 104.0 and transforms["focal_given"]["given"] == "--focal 104"
+    assert transforms["focal_given"]["refined"] is False
+    assert summary["camera"]["params"][0] == 104.0 and summary["camera"]["focal_given"] == transforms["focal_given"]
+    assert summary["registered_fraction"] == 1.0
