@@ -19,7 +19,15 @@ from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
 from .frame_list import check_name_order, read_frame_list, time_order
 from .known_focal import known_focal
-from .model_export import drop_frames, judge_camera_path, registered_poses, transforms_dict, write_model_outputs
+from .model_export import (
+    drop_frames,
+    inlier_points,
+    judge_camera_path,
+    point_cloud,
+    registered_poses,
+    transforms_dict,
+    write_model_outputs,
+)
 from .quality_gate import (
     STATIC_ADVICE,
     blank_frames_note,
@@ -36,6 +44,7 @@ from .quality_gate import (
 )
 from .sfm import SfmResult, resolve_matcher, run_sfm
 from .static_check import MotionPrecheck, measure_motion
+from .up_check import check_up
 from .world_frame import orient_reconstruction
 
 STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
@@ -124,6 +133,10 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         t0 = time.perf_counter()
         # a gravity- and wall-aligned world before anything is written, so every output shares it
         frame = orient_reconstruction(rec) if cfg.orient else None
+        # a second, independent up (the largest horizontal plane of the points): warns, never turns the world
+        up = check_up(np.asarray(inlier_points(point_cloud(rec)).points)) if frame is not None else None
+        if up is not None and (up_warning := up.warning()) is not None:
+            warnings_.append(up_warning)
         # file_path relative to the final folder (not the atomic temp one): ns-train --data POSES resolves it
         transforms = transforms_dict(rec, frames.source_index, image_dir=frames.image_dir, out_dir=cfg.out_dir)
         if focal is not None:  # only then: a run without one writes what it always wrote
@@ -171,6 +184,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
                        "sequential_overlap": cfg.sequential_overlap,
                        "loop_detection": cfg.vocab_tree is not None, "orient": cfg.orient},
             "world_frame": None if frame is None else frame.as_dict(),
+            **({} if up is None else {"up_check": up.as_dict()}),
             "warnings": warnings_,
             "timings": timings,
         }
