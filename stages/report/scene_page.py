@@ -119,6 +119,15 @@ def section_poses(sd: SceneData) -> str:
                      f"{escape(str(w.get('yaw_source')))} (strength {fmt(w.get('yaw_strength'), 2)})"])
     elif "world_frame" in p:
         rows.append(["world frame", "COLMAP's, as the mapper left it (--no-orient)"])
+    up = p.get("up_check")
+    if up:  # docs/poses.md, "World frame": a second up, which only warns
+        rows.append(["up check: largest horizontal plane's normal against z (deg)",
+                     f"{fmt(up.get('plane_tilt_deg'), 2)} ({up.get('plane_points')} of {up.get('n_points')} points)"
+                     if up.get("plane_tilt_deg") is not None else "no horizontal plane found: not checked"])
+    given = (p.get("camera") or {}).get("focal_given")
+    if given:  # docs/poses.md, "Known focal length"
+        rows.append(["focal length given", f"{fmt(given.get('focal_px'), 1)} px ({escape(str(given.get('given')))}; "
+                     + ("refined by COLMAP)" if given.get("refined") else "kept fixed)")])
     t = p.get("trajectory") or {}
     if t:  # the numbers the pose gate judged (docs/poses.md, "Quality gate")
         reason = f": {escape(t['reason'])}" if t.get("reason") else ""
@@ -129,6 +138,10 @@ def section_poses(sd: SceneData) -> str:
                  ["longest step / typical step", fmt(t.get("max_step_ratio"))],
                  ["frames trimmed as jumps", escape(", ".join(t.get("trimmed") or []) or "none")]]
     html = table(["COLMAP", "value"], rows)
+    warnings = p.get("warnings") or []
+    if warnings:  # the stage printed them on stderr, where a workflow's log keeps them out of sight
+        html += (f"<p class=\"note\">{len(warnings)} warning(s) from the poses stage (poses.json, warnings):</p><ul>"
+                 + "".join(f"<li>{escape(str(w))}</li>" for w in warnings) + "</ul>")
     if sd.pose_error is None:
         html += missing(_why_skipped(sd, "pose_compare"))
     else:

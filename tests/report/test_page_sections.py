@@ -159,6 +159,27 @@ def test_pose_errors_are_shown_in_percent_and_degrees(tmp_path, tiny_dataset):
     assert cells["focal error (relative fx)"] == "9.00 %"
 
 
+def test_pose_warnings_up_check_and_a_given_focal_are_shown(tmp_path, tiny_dataset):
+    """The poses stage's warnings reached only its log (stderr) before; the up check and a given focal length are rows
+    of the COLMAP table."""
+    sd = _scene(tmp_path, tiny_dataset)
+    sd.poses = {**sd.poses, "warnings": ["the world's up <z> lies 11.4 degrees from ..."],
+                "up_check": {"plane_tilt_deg": 11.37, "plane_points": 41, "n_points": 420},
+                "camera": {"model": "RADIAL", "focal_given": {"focal_px": 150.69, "given": "--focal 150.69",
+                                                              "refined": False}}}
+    html = section_poses(sd)
+    cells = dict(r for r in _rows(html))
+    assert cells["up check: largest horizontal plane's normal against z (deg)"] == "11.37 (41 of 420 points)"
+    assert cells["focal length given"] == "150.7 px (--focal 150.69; kept fixed)"
+    assert "1 warning(s) from the poses stage" in html
+    assert "<li>the world&#x27;s up &lt;z&gt; lies 11.4 degrees from ...</li>" in html  # escaped
+    sd.poses = {**sd.poses, "warnings": [], "up_check": {"plane_tilt_deg": None, "plane_points": 3, "n_points": 20}}
+    html = section_poses(sd)
+    assert dict(r for r in _rows(html))["up check: largest horizontal plane's normal against z (deg)"] == \
+        "no horizontal plane found: not checked"
+    assert "warning(s) from the poses stage" not in html
+
+
 def test_states_table_marks_the_interpolation_used_and_gives_it_the_truth_errors(tmp_path, tiny_dataset):
     sd = _scene(tmp_path, tiny_dataset)
     sd.states_vs_truth = {"object0": {"mae": 0.05, "max": 0.08, "n": 3}}
