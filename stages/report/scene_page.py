@@ -15,6 +15,7 @@ from stages.scene.dataset import spans_closed_to_open
 from stages.scene.machine import machine_line
 
 from .export_section import section_export
+from .frames_section import section_frames
 from .html_parts import fmt, missing, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
 from .labels_section import section_labels
@@ -26,6 +27,7 @@ from .trust import TrustFlag, assess_run
 SECTIONS = [
     ("rules", "Rules run and skipped"),
     ("timings", "Stage timings"),
+    ("frames", "Frames"),
     ("poses", "Pose quality"),
     ("labels", "Object masks"),
     ("states", "Interpolation errors"),
@@ -724,7 +726,8 @@ def build_scene_page(sd: SceneData, *, views: int = 3, index: str | None = None)
             f"{escape(', '.join(info.get('objects', [])) or '–')}</p>")
     nav = "<nav>" + "".join(f'<a href="#{k}">{escape(t)}</a>' for k, t in SECTIONS) + "</nav>"
     sliders, images = section_sliders(sd)
-    bodies = {"rules": section_rules(sd), "timings": section_timings(sd), "poses": section_poses(sd),
+    bodies = {"rules": section_rules(sd), "timings": section_timings(sd),
+              "frames": section_frames(sd.frames, _why_skipped(sd, "frames")), "poses": section_poses(sd),
               "labels": section_labels(sd, _why_skipped(sd, "labels")),
               "states": section_states(sd), "methods": section_methods(sd), "verdict": section_verdict(sd),
               "curves": section_curves(sd),
