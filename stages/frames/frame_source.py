@@ -280,10 +280,26 @@ class ImageFolderSource:
                 if shape is None:
                     shape = image.shape
                 elif image.shape != shape:
-                    raise FrameSourceError(path, f"the image is {image.shape[1]}x{image.shape[0]} but earlier "
-                                           f"frames are {shape[1]}x{shape[0]}", "give frames of one camera at one size")
+                    raise _size_mismatch(path, image.shape, shape)
                 yield SourceFrame(position=position, source_index=index, timestamp=stamp, image=image,
                                   remarks=remarks, where=str(path))
+
+
+def _size_mismatch(path: Path, size: tuple[int, ...], first: tuple[int, ...]) -> FrameSourceError:
+    """A photo of another size than the folder's first: turned (portrait among landscape), or another camera or a
+    resized copy. COLMAP shares one camera among the frames, so neither can be mixed in."""
+    (h, w), (h0, w0) = size[:2], first[:2]
+    problem = f"the image is {w}x{h} but earlier frames are {w0}x{h0}"
+    if (w, h) == (h0, w0):
+        return FrameSourceError(path, problem + ": it is turned by 90 degrees against them (a photo held the other "
+                                "way, or a viewer that stored the turn in the pixels)",
+                                f"turn it back to {w0}x{h0} in an image editor, or leave it out of the folder")
+    if w * h0 == h * w0:  # the same shape at another scale
+        return FrameSourceError(path, problem + " (a resized copy?)",
+                                f"resize it to {w0}x{h0} if it is a scaled copy of a photo from the same lens, else "
+                                "leave it out of the folder (frames must come from one camera at one size)")
+    return FrameSourceError(path, problem + " (another camera, or a crop)",
+                            "leave it out of the folder: frames must come from one camera at one size")
 
 
 def fourcc_text(value: float) -> str:

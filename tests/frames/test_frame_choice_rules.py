@@ -102,3 +102,20 @@ def test_a_repeat_is_the_frame_before_to_the_last_pixel(tmp_path: Path) -> None:
                                 "frame_0003.png": a})
     summary = extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
     assert summary["repeated_frame_count"] == 1 and summary["kept_repeats"] == ["frame_00001.png"]
+
+
+@pytest.mark.parametrize(("odd", "said", "fix"), [
+    ((48, 64), "it is turned by 90 degrees against them", "turn it back to 64x48"),
+    ((96, 72), r"\(a resized copy\?\)", "resize it to 64x48 if it is a scaled copy"),
+    ((64, 64), r"\(another camera, or a crop\)", "leave it out of the folder"),
+])
+def test_a_photo_of_another_size_is_refused_with_the_likely_cause(tmp_path: Path, odd, said, fix) -> None:
+    """The folder's first photo is 64x48 (width x height); the second is turned, scaled or of another shape."""
+    first = textured_frame(0)[:48, :64]
+    w, h = odd
+    second = cv2.resize(textured_frame(1), (w, h))
+    folder = _folder(tmp_path, {"IMG_0001.png": first, "IMG_0002.png": second})
+    with pytest.raises(FrameSourceError, match=rf"the image is {w}x{h} but earlier frames are 64x48.*{said}") as err:
+        extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
+    assert fix in err.value.fix and err.value.path.name == "IMG_0002.png"
+    assert not (tmp_path / "frames").exists()
