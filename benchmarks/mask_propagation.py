@@ -1,6 +1,6 @@
 """Masks on key frames only: propagated masks against the truth, and LiveScene trained on them.
 
-    python benchmarks/mask_propagation.py [--scenes demo kitchen] [--every 8] [--train] [--work DIR]
+    python benchmarks/mask_propagation.py [--scenes demo kitchen SPEC.yaml] [--every 8] [--train] [--work DIR]
 
 For each synthetic capture: generate it and extract its frames (`livescene capture`, `livescene frames`),
 keep the capture's masks on every EVERY-th frame only (0, EVERY, 2 EVERY, ...), run `livescene labels`
@@ -60,13 +60,18 @@ def label_maps(labels: Path) -> dict[str, np.ndarray]:
     return out
 
 
-def prepare(name: str, work: Path, every: int) -> dict[str, Path]:
+def spec_path(scene: str) -> Path:
+    """A capture spec of config/captures by name, or a spec file (``.yaml``) given by path."""
+    return Path(scene) if scene.endswith((".yaml", ".yml")) else ROOT / "config" / "captures" / f"{scene}.yaml"
+
+
+def prepare(name: str, work: Path, every: int, spec: Path) -> dict[str, Path]:
     d = work / name
     (d / "logs").mkdir(parents=True, exist_ok=True)
     paths = {"capture": d / "capture", "frames": d / "frames", "keys": d / f"key_masks_every{every}",
              "labels_truth": d / "labels_truth", "labels_prop": d / f"labels_every{every}", "logs": d / "logs"}
     if not (paths["capture"] / "truth" / "transforms.json").is_file():
-        sh([*LIVESCENE, "capture", "--spec", str(ROOT / "config" / "captures" / f"{name}.yaml"), "--out",
+        sh([*LIVESCENE, "capture", "--spec", str(spec), "--out",
             str(paths["capture"]), "--force", "--no-progress"], d / "logs" / "capture.log")
     if not (paths["frames"] / "frames.csv").is_file():
         sh([*LIVESCENE, "frames", "--video", str(paths["capture"] / "video.mp4"), "--out", str(paths["frames"]),
@@ -187,16 +192,18 @@ def paired(a: dict[str, float], b: dict[str, float]) -> tuple[float, float, floa
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenes", nargs="+", default=["demo", "kitchen"], help="capture specs of config/captures")
+    p.add_argument("--scenes", nargs="+", default=["demo", "kitchen"],
+                   help="capture specs of config/captures, by name, or spec files (.yaml) by path")
     p.add_argument("--every", type=int, default=8, help="keep the masks of every N-th frame")
     p.add_argument("--work", type=Path, default=Path("/tmp/mask_propagation"), help="folder for everything (reused)")
     p.add_argument("--train", action="store_true", help="also train LiveScene on truth and on propagated masks")
     p.add_argument("--steps", type=int, default=1500, help="training steps per run (the workflow's default)")
     args = p.parse_args()
     results, trained = [], {}
-    for name in args.scenes:
+    for scene in args.scenes:
+        name = spec_path(scene).stem
         print(f"{name}:", flush=True)
-        paths = prepare(name, args.work, args.every)
+        paths = prepare(name, args.work, args.every, spec_path(scene))
         shutil.rmtree(paths["labels_prop"], ignore_errors=True)
         results.append(score(name, paths))
         if args.train:
