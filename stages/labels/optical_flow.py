@@ -4,7 +4,8 @@ Mask propagation (docs/labels-states.md, "Masks on key frames only") chains flow
 frames: small displacements are what DIS handles best, and chaining lets the occlusion check run at
 every step. Frames larger than ``max_side`` are downscaled for the flow, and the flows are kept at that
 size (sampled at scaled positions by ``sample``), so the flows of a 4K phone video cost what a 1080p
-one's do, in time and memory.
+one's do, in time and memory. Each flow is computed once; the propagation releases it after use, parking
+it in a scratch folder (``spill``) when its second pass over the segment will need it again.
 """
 
 from __future__ import annotations
@@ -35,9 +36,11 @@ def read_grey(path: Path, shape: tuple[int, int] | None = None) -> np.ndarray:
 
 
 class FrameFlows:
-    """Flows between frames ``i`` and ``i +/- 1`` of an image list, cached until ``forget_before``."""
+    """Flows between frames ``i`` and ``i +/- 1`` of an image list, held until ``release``d (then dropped, or parked
+    in ``spill`` and read back by the next ``flow``)."""
 
-    def __init__(self, images: Sequence[Path], shape: tuple[int, int], max_side: int = FLOW_MAX_SIDE) -> None:
+    def __init__(self, images: Sequence[Path], shape: tuple[int, int], max_side: int = FLOW_MAX_SIDE,
+                 spill: Path | None = None) -> None:
         self.images = list(images)
         self.shape = shape
         h, w = shape
@@ -47,6 +50,7 @@ class FrameFlows:
         self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
         self._grey: dict[int, np.ndarray] = {}
         self._flow: dict[tuple[int, int], np.ndarray] = {}
+        self._spill = spill
         self.computed = 0
         """Number of flows computed (for the timing report)."""
 
@@ -55,8 +59,13 @@ class FrameFlows:
             img = read_grey(self.images[i], self.shape)
             if self.scale < 1.0:
                 img = cv2.resize(img, self._small, interpolation=cv2.INTER_AREA)
+            if len(self._grey) >= 3:  # a flow needs two frames; the walks move one frame at a time
+                self._grey.pop(next(iter(self._grey)))
             self._grey[i] = img
         return self._grey[i]
+
+    def _parked(self, i: int, j: int) -> Path | None:
+        return None if self._spill is None else self._spill / f"flow_{i}_{j}.npy"
 
     def flow(self, i: int, j: int) -> np.ndarray:
         """float32 ``h x w x 2`` (dx, dy) at the flow resolution: pixel ``p`` of frame i (flow pixels) is seen
@@ -65,9 +74,13 @@ class FrameFlows:
             raise ValueError(f"flows are between neighbouring frames only, not {i} -> {j}")
         key = (i, j)
         if key not in self._flow:
-            f = self._dis.calc(self.grey(i), self.grey(j), None)
-            self._flow[key] = np.ascontiguousarray(f, dtype=np.float32)
-            self.computed += 1
+            parked = self._parked(i, j)
+            if parked is not None and parked.is_file():
+                self._flow[key] = np.load(parked)
+            else:
+                f = self._dis.calc(self.grey(i), self.grey(j), None)
+                self._flow[key] = np.ascontiguousarray(f, dtype=np.float32)
+                self.computed += 1
         return self._flow[key]
 
     def sample(self, i: int, j: int, pos: np.ndarray) -> np.ndarray:
@@ -80,7 +93,16 @@ class FrameFlows:
         ys = (pos[..., 1] + 0.5) * self.scale - 0.5
         return cv2.remap(f, xs, ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) / self.scale
 
-    def forget_before(self, index: int) -> None:
-        """Drop cached images and flows of frames before ``index`` (memory stays bounded on long videos)."""
-        self._flow = {k: v for k, v in self._flow.items() if min(k) >= index}
-        self._grey = {k: v for k, v in self._grey.items() if k >= index}
+    def release(self, i: int, j: int, keep: bool = False) -> None:
+        """Free the flows i -> j and j -> i from memory; ``keep`` parks them in ``spill`` for one more use,
+        otherwise a parked copy is deleted too."""
+        for key in ((i, j), (j, i)):
+            flow = self._flow.pop(key, None)
+            parked = self._parked(*key)
+            if keep:
+                if parked is None:
+                    raise ValueError("FrameFlows was made without a spill folder: nothing can be kept")
+                if flow is not None and not parked.is_file():
+                    np.save(parked, flow)
+            elif parked is not None:
+                parked.unlink(missing_ok=True)

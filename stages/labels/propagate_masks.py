@@ -12,6 +12,8 @@ Writes into the LABELS folder being built (docs/labels-states.md, "Masks on key 
 
 from __future__ import annotations
 
+import itertools
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,10 +28,11 @@ from stages.scene import label_map_to_onehot, write_mask
 
 from .frame_set import FrameSet
 from .optical_flow import FLOW_MAX_SIDE, FrameFlows
-from .propagation import STEP_SIGMA_PX, KeyFrames, iou_per_object, mean_of, propagate_to
+from .propagation import STEP_SIGMA_PX, KeyFrames, Track, fuse, iou_per_object, mean_of, read_track, walk
 
 METHOD = ("OpenCV DIS optical flow (MEDIUM preset) chained over neighbouring frames, every pixel tracked to "
-          "the annotated frames before and after it, forward-backward occlusion check at each step, the two "
+          "the annotated frames before and after it (each frame's map to an annotation composed from its "
+          "neighbour's: one step per frame), forward-backward occlusion check at each step, the two "
           "directions fused with weights falling linearly with the distance to their annotation")
 
 
@@ -61,18 +64,20 @@ def _frame_row(fid: str, prev: str | None, nxt: str | None, nearest: str, distan
     return row
 
 
-def leave_one_out(flows: FrameFlows, keys: KeyFrames, held_out: int, frame_ids: tuple[str, ...],
-                  names: list[str]) -> dict:
-    """Propagate to an annotated frame from the other annotations only; IoU per object against its annotation."""
-    result = propagate_to(flows, keys.without(held_out), held_out, len(names) + 1)
-    ious = iou_per_object(result.labels, keys.label_map(held_out), len(names))
+def leave_one_out(held_out: int, before: Track | None, after: Track | None, label_map: np.ndarray,
+                  frame_ids: tuple[str, ...], names: list[str]) -> dict:
+    """An annotated frame predicted from its neighbouring annotations only (``before`` and ``after``: its tracks to
+    them), IoU per object against its own annotation."""
+    tracks = [t for t in (before, after) if t is not None]
+    labels, confidence = fuse(tracks[0], tracks[1] if len(tracks) > 1 else None, held_out, len(names) + 1)
+    ious = iou_per_object(labels, label_map, len(names))
     return {"frame": frame_ids[held_out],
-            "previous_key": None if result.previous_key is None else frame_ids[result.previous_key],
-            "next_key": None if result.next_key is None else frame_ids[result.next_key],
-            "distance": result.distance,
+            "previous_key": None if before is None else frame_ids[before.key],
+            "next_key": None if after is None else frame_ids[after.key],
+            "distance": min(abs(held_out - t.key) for t in tracks),
             "iou": {names[k - 1]: None if v is None else round(v, 5) for k, v in ious.items()},
             "mean_iou": _round(mean_of(list(ious.values()))),
-            "mean_confidence": round(float(result.confidence.mean()), 5)}
+            "mean_confidence": round(float(confidence.mean()), 5)}
 
 
 def _round(v: float | None, digits: int = 5) -> float | None:
@@ -87,60 +92,97 @@ def propagate_missing(tmp: Path, frames: FrameSet, annotated: dict[str, np.ndarr
 
     Writes the masks, confidence maps, confidence.csv and propagation.json into ``tmp`` (the atomic
     staging folder of the LABELS output) and calls ``on_frame(fid, labels)`` for each propagated frame.
+
+    Each segment between two annotations ``a < b`` is walked twice, one flow step per frame each time: from ``b``
+    back to ``a`` (the tracks to ``b`` are parked in a scratch folder inside ``tmp``, and so are the flows), then
+    from ``a`` on to ``b``, fusing each frame's two tracks and writing it. Both walks go one frame further, onto
+    the other annotation, for its leave-one-out estimate.
     """
     ids = frames.frame_ids
     index_of = {f: i for i, f in enumerate(ids)}
     keys = KeyFrames({index_of[f]: lab for f, lab in annotated.items()})
     order = sorted(keys)
     n_labels = len(names) + 1
-    flows = FrameFlows(frames.images, (frames.height, frames.width), max_side=max_side)
-    rows: list[dict] = []
+    rows: dict[int, dict] = {}
     loo: list[dict] = []
     result = PropagationResult(frames=[], mean_confidence={}, sources={})
-    position = {k: j for j, k in enumerate(order)}
     (tmp / "confidence").mkdir(exist_ok=True)
+    for k in order:
+        rows[k] = _frame_row(ids[k], ids[k], ids[k], ids[k], 0, annotated[ids[k]], None, names)
     t0 = time.perf_counter()
     loo_s = 0.0
+    bar = tqdm(total=len(ids) - len(order), desc="propagate masks", unit="frame", disable=not progress)
 
-    def run_loo(j: int) -> None:
-        nonlocal loo_s
-        if len(order) < 2:
-            return
-        start = time.perf_counter()
-        loo.append(leave_one_out(flows, keys, order[j], ids, names))
-        loo_s += time.perf_counter() - start
-
-    bar = tqdm(total=len(ids), desc="propagate masks", unit="frame", disable=not progress)
-    for t, fid in enumerate(ids):
-        bar.update()
-        if t in position:
-            j = position[t]
-            if j >= 1:
-                # every flow between the annotations around order[j - 1] is cached now: score it, then free memory
-                run_loo(j - 1)
-                flows.forget_before(order[j - 1])
-            rows.append(_frame_row(fid, fid, fid, fid, 0, annotated[fid], None, names))
-            continue
-        p = propagate_to(flows, keys, t, n_labels, step_sigma)
-        prev = None if p.previous_key is None else ids[p.previous_key]
-        nxt = None if p.next_key is None else ids[p.next_key]
-        write_mask(tmp, fid, label_map_to_onehot(p.labels.astype(np.int64) - 1, len(names)))
+    def write(t: int, before: Track | None, after: Track | None) -> None:
+        tracks = [tr for tr in (before, after) if tr is not None]
+        labels, confidence = fuse(tracks[0], tracks[1] if len(tracks) > 1 else None, t, n_labels)
+        fid = ids[t]
+        prev = None if before is None else ids[before.key]
+        nxt = None if after is None else ids[after.key]
+        distance = min(abs(t - tr.key) for tr in tracks)
+        nearest = min(tracks, key=lambda tr: abs(tr.key - t)).key
+        write_mask(tmp, fid, label_map_to_onehot(labels.astype(np.int64) - 1, len(names)))
         path = tmp / "confidence" / f"{fid}.png"
-        if not cv2.imwrite(str(path), np.round(p.confidence * 255).astype(np.uint8)):
+        if not cv2.imwrite(str(path), np.round(confidence * 255).astype(np.uint8)):
             raise OSError(f"could not write {path}")
-        nearest = ids[min((k for k in (p.previous_key, p.next_key) if k is not None), key=lambda k: abs(k - t))]
-        rows.append(_frame_row(fid, prev, nxt, nearest, p.distance, p.labels, p.confidence, names))
-        result.frames.append(fid)
-        result.mean_confidence[fid] = float(p.confidence.mean())
+        rows[t] = _frame_row(fid, prev, nxt, ids[nearest], distance, labels, confidence, names)
+        result.mean_confidence[fid] = float(confidence.mean())
         result.sources[fid] = [prev, nxt]
         if on_frame is not None:
-            on_frame(fid, p.labels)
-    run_loo(len(order) - 1)
+            on_frame(fid, labels)
+        bar.update()
+
+    def held_out(j: int, before: Track | None, after: Track | None) -> None:
+        nonlocal loo_s
+        if len(order) >= 2:
+            start = time.perf_counter()
+            loo.append(leave_one_out(order[j], before, after, keys.label_map(order[j]), ids, names))
+            loo_s += time.perf_counter() - start
+
+    # the scratch folder lives in the staging folder, so an interrupted run leaves nothing behind in LABELS
+    with tempfile.TemporaryDirectory(prefix=".propagation-", dir=tmp) as scratch_name:
+        scratch = Path(scratch_name)
+        flows = FrameFlows(frames.images, (frames.height, frames.width), max_side=max_side, spill=scratch)
+        to_previous: Track | None = None  # the track of the last annotation passed to the one before it
+        bounds: list[int | None] = [None, *order, None]
+        for j, (a, b) in enumerate(itertools.pairwise(bounds)):
+            to_next: Track | None = None  # the track of ``a`` to ``b`` (leave-one-out)
+            if b is not None:  # from b back to a (or to the first frame), parking what the walk on needs
+                stop = 0 if a is None else a
+                keep = a is not None
+                tick = time.perf_counter()
+                for s, state in walk(flows, keys[b], stop, step_sigma,
+                                     after_step=lambda i, n, keep=keep: flows.release(i, n, keep=keep)):
+                    track = read_track(keys[b], state)
+                    if s == a:
+                        to_next = track
+                        loo_s += time.perf_counter() - tick
+                    else:
+                        np.save(scratch / f"labels_{s}.npy", track.labels)
+                        np.save(scratch / f"confidence_{s}.npy", track.confidence)
+                    tick = time.perf_counter()
+            if a is None:  # frames before the first annotation: its track only
+                for s in range(0, b):
+                    write(s, None, _parked_track(scratch, s, b))
+                continue
+            held_out(j - 1, to_previous, to_next)
+            stop = len(ids) - 1 if b is None else b
+            tick = time.perf_counter()
+            for s, state in walk(flows, keys[a], stop, step_sigma,
+                                 after_step=lambda i, n: flows.release(i, n, keep=False)):
+                track = read_track(keys[a], state)
+                if s == b:
+                    to_previous = track
+                    loo_s += time.perf_counter() - tick
+                else:
+                    write(s, track, None if b is None else _parked_track(scratch, s, b))
+                tick = time.perf_counter()
     bar.close()
     total_s = time.perf_counter() - t0
+    result.frames = [ids[t] for t in sorted(rows) if t not in keys]
 
     # tmp is the atomic staging folder of LABELS: plain writes are safe here
-    table = pd.DataFrame(rows)
+    table = pd.DataFrame([rows[t] for t in sorted(rows)])
     table.to_csv(tmp / "confidence.csv", index=False)
     by_distance = table[~table["annotated"]].groupby("distance")["mean_confidence"].mean()
     result.report = {
@@ -163,6 +205,15 @@ def propagate_missing(tmp: Path, frames: FrameSet, annotated: dict[str, np.ndarr
                     "per_frame_ms": round(1000 * (total_s - loo_s) / max(len(result.frames), 1), 2)},
     }
     return result
+
+
+def _parked_track(scratch: Path, s: int, key: int) -> Track:
+    """Frame ``s``'s track to ``key``, parked by the walk back from ``key`` (read once, then deleted)."""
+    paths = scratch / f"labels_{s}.npy", scratch / f"confidence_{s}.npy"
+    track = Track(labels=np.load(paths[0]), confidence=np.load(paths[1]), key=key)
+    for path in paths:
+        path.unlink()
+    return track
 
 
 def _summarise_loo(loo: list[dict], names: list[str], n_keys: int) -> dict:

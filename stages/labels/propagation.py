@@ -1,17 +1,26 @@
-"""Propagate key-frame masks to every frame by chained optical flow, with occlusion checks and confidence.
+"""Propagate key-frame masks to every frame by composed optical flow, with occlusion checks and confidence.
 
 For a frame ``t`` between annotated frames ``a < t < b`` every pixel of ``t`` is tracked back to ``a`` and
 forward to ``b`` through the flows of neighbouring frames, and takes the label found there (re-seeding: each
 segment starts afresh from its own two annotations, so errors never carry past an annotated frame). Frames
 before the first or after the last annotation are tracked to the one annotation they have.
 
+The tracks are not followed pixel by pixel through the whole chain (that costs one step per frame between ``t``
+and the annotation, for every ``t``: quadratic in the gap). Each frame's *map* to an annotation is composed from
+its neighbour's, one step nearer the annotation (``compose_step``): a pixel moves by the flow to the neighbour
+and takes the neighbour's map where it lands, sampled bilinearly. A walk from the annotation outwards (``walk``)
+so costs one step per frame. With flows that move pixels by whole pixels the maps are exactly the chained tracks;
+otherwise they differ by the interpolation of neighbouring tracks (docs/labels-states.md measures it).
+
 Each step of a track is checked forward-backward (Sundaram, Brox and Keutzer, ECCV 2010): a pixel whose
 round trip misses by more than ``0.01 (|w|^2 + |w_back|^2) + 0.5`` px^2 is occluded (or left the view) in
-the next frame, and the track loses its say. A surviving track's label is wrong only if its drift crosses
-an object boundary of the annotation, so its confidence is ``Phi((d - 0.5) / sigma)``, with ``d`` the
-distance of the landing point from the nearest pixel of another label and ``sigma`` the accumulated drift:
-``STEP_SIGMA_PX`` per step plus a quarter of each step's squared round-trip error. Confidence therefore
-falls with the number of steps (distance to the annotation), near boundaries, and behind occlusions.
+the next frame, and the track loses its say; a composed map is valid where the pixel's own step passes and the
+neighbour's map, read where it lands, is at least half valid. A surviving track's label is wrong only if its
+drift crosses an object boundary of the annotation, so its confidence is ``Phi((d - 0.5) / sigma)``, with ``d``
+the distance of the landing point from the nearest pixel of another label and ``sigma`` the accumulated drift:
+``STEP_SIGMA_PX`` per step plus a quarter of each step's squared round-trip error (the pixel's own step plus the
+neighbour's accumulated variance where it lands). Confidence therefore falls with the number of steps (distance
+to the annotation), near boundaries, and behind occlusions.
 
 The two directions are fused per pixel with weights falling linearly with the distance to their
 annotation, each direction's vote spread by its confidence. docs/labels-states.md describes the outputs.
@@ -20,7 +29,7 @@ annotation, each direction's vote spread by its confidence. docs/labels-states.m
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
 import cv2
@@ -96,14 +105,13 @@ class KeyFrames(Mapping[int, KeyFrame]):
     """Annotated label maps by frame position, turned into ``KeyFrame`` on first use and cached for the few
     a frame needs (their float distance maps would not fit in memory for a long high-resolution video)."""
 
-    def __init__(self, labels: Mapping[int, np.ndarray], cache_size: int = 4, exclude: int | None = None) -> None:
+    def __init__(self, labels: Mapping[int, np.ndarray], cache_size: int = 4) -> None:
         self._labels = labels
         self._cache: dict[int, KeyFrame] = {}
         self._cache_size = cache_size
-        self._exclude = exclude
 
     def __getitem__(self, index: int) -> KeyFrame:
-        if index == self._exclude or index not in self._labels:
+        if index not in self._labels:
             raise KeyError(index)
         if index not in self._cache:
             if len(self._cache) >= self._cache_size:
@@ -112,23 +120,17 @@ class KeyFrames(Mapping[int, KeyFrame]):
         return self._cache[index]
 
     def __contains__(self, index: object) -> bool:  # without building the KeyFrame (Mapping's default would)
-        return index != self._exclude and index in self._labels
+        return index in self._labels
 
     def __iter__(self) -> Iterator[int]:
-        return (i for i in self._labels if i != self._exclude)
+        return iter(self._labels)
 
     def __len__(self) -> int:
-        return len(self._labels) - (self._exclude in self._labels)
+        return len(self._labels)
 
     def label_map(self, index: int) -> np.ndarray:
         """The annotation itself (uint16, 0 background)."""
         return self._labels[index]
-
-    def without(self, index: int) -> KeyFrames:
-        """The same annotations less ``index`` (leave-one-out), sharing this cache."""
-        view = KeyFrames(self._labels, self._cache_size, exclude=index)
-        view._cache = self._cache
-        return view
 
 
 def _sample(field: np.ndarray, pos: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
@@ -141,31 +143,76 @@ def _squared_length(v: np.ndarray) -> np.ndarray:
     return np.square(v[..., 0]) + np.square(v[..., 1])
 
 
-def track(flows: FrameFlows, key: KeyFrame, target: int, step_sigma: float = STEP_SIGMA_PX) -> Track:
-    """Follow every pixel of frame ``target`` to the annotated frame ``key`` and read its label there."""
-    h, w = key.labels.shape
+def _grid(h: int, w: int) -> np.ndarray:
+    """``H x W x 2`` float32 pixel positions (x, y) of a frame."""
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-    pos = np.dstack([xs, ys])
-    valid = np.ones((h, w), bool)
-    variance = np.zeros((h, w), np.float32)
-    step = 1 if key.index > target else -1
-    s = target
-    while s != key.index:
-        n = s + step
-        w_there = flows.sample(s, n, pos)
-        new = pos + w_there
-        w_back = flows.sample(n, s, new)
-        err2 = _squared_length(w_there + w_back)
-        tol = 0.01 * (_squared_length(w_there) + _squared_length(w_back)) + 0.5
-        inside = (new[..., 0] >= -0.5) & (new[..., 0] <= w - 0.5) & (new[..., 1] >= -0.5) & (new[..., 1] <= h - 0.5)
-        valid &= (err2 <= tol) & inside
-        variance += step_sigma ** 2 + err2 / 4.0
-        pos, s = new, n
+    return np.dstack([xs, ys])
+
+
+def start_map(key: KeyFrame) -> np.ndarray:
+    """The map of the annotated frame to itself: every pixel at its own position, no drift, valid."""
+    h, w = key.labels.shape
+    state = np.zeros((h, w, 4), np.float32)
+    state[..., :2] = _grid(h, w)
+    state[..., 3] = 1.0
+    return state
+
+
+def compose_step(flows: FrameFlows, there: np.ndarray, s: int, n: int, grid: np.ndarray,
+                 step_sigma: float = STEP_SIGMA_PX) -> np.ndarray:
+    """The map of frame ``s`` to an annotated frame from the map ``there`` of its neighbour ``n`` (one step nearer
+    the annotation): each pixel of ``s`` moves by the flow s -> n and takes ``there``'s position, accumulated
+    variance and validity where it lands (bilinear), its own step's round-trip check and drift added.
+
+    A map is ``H x W x 4`` float32: x, y in the annotated frame, variance (px^2), validity (1 or 0). Two flow
+    samplings per frame: the whole segment costs one step per frame instead of one per frame and frame between
+    it and the annotation."""
+    h, w = grid.shape[:2]
+    w_there = flows.sample(s, n, grid)
+    new = grid + w_there
+    w_back = flows.sample(n, s, new)
+    err2 = _squared_length(w_there + w_back)
+    tol = 0.01 * (_squared_length(w_there) + _squared_length(w_back)) + 0.5
+    inside = (new[..., 0] >= -0.5) & (new[..., 0] <= w - 0.5) & (new[..., 1] >= -0.5) & (new[..., 1] <= h - 0.5)
+    state = _sample(there, new)
+    state[..., 2] = (step_sigma ** 2 + err2 / 4.0) + state[..., 2]
+    state[..., 3] = ((err2 <= tol) & inside & (state[..., 3] >= 0.5)).astype(np.float32)
+    return state
+
+
+def walk(flows: FrameFlows, key: KeyFrame, stop: int, step_sigma: float = STEP_SIGMA_PX,
+         after_step: Callable[[int, int], None] | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """The maps of frames ``key.index -/+ 1``, ..., ``stop`` to the annotated frame ``key``, each composed from the
+    previous one (``compose_step``); ``after_step(s, n)`` is called once the flows between s and n are used."""
+    h, w = key.labels.shape
+    grid = _grid(h, w)
+    state = start_map(key)
+    step = 1 if stop > key.index else -1
+    for s in range(key.index + step, stop + step, step):
+        state = compose_step(flows, state, s, s - step, grid, step_sigma)
+        if after_step is not None:
+            after_step(s, s - step)
+        yield s, state
+
+
+def read_track(key: KeyFrame, state: np.ndarray) -> Track:
+    """Labels and confidence a frame's map to ``key`` gives: the annotation where each pixel lands (nearest),
+    trusted by ``Phi((d - 0.5) / sigma)``, 0 where the track was occluded or left the view."""
+    pos = np.ascontiguousarray(state[..., :2])
     labels = _sample(key.labels, pos, cv2.INTER_NEAREST)
     d = _sample(key.boundary_distance, pos)
-    confidence = ndtr((d - 0.5) / np.sqrt(np.maximum(variance, 1e-12))).astype(np.float32)
-    confidence[~valid] = 0.0
+    confidence = ndtr((d - 0.5) / np.sqrt(np.maximum(state[..., 2], 1e-12))).astype(np.float32)
+    confidence[state[..., 3] < 0.5] = 0.0
     return Track(labels=labels.astype(np.uint16), confidence=confidence, key=key.index)
+
+
+def track(flows: FrameFlows, key: KeyFrame, target: int, step_sigma: float = STEP_SIGMA_PX) -> Track:
+    """Follow every pixel of frame ``target`` to the annotated frame ``key`` and read its label there (the walk
+    from ``key`` to ``target``: one step per frame between them)."""
+    state = start_map(key)
+    for _, state in walk(flows, key, target, step_sigma):  # noqa: B007 (the last map is the target's)
+        pass
+    return read_track(key, state)
 
 
 def fuse(a: Track, b: Track | None, target: int, n_labels: int) -> tuple[np.ndarray, np.ndarray]:
