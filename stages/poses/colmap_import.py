@@ -36,6 +36,7 @@ from .model_export import (
 )
 from .quality_gate import check_trajectory, compact_names, intrinsics_warnings
 from .trajectory_check import TrajectorySettings
+from .up_check import check_model_up
 from .world_frame import orient_reconstruction
 
 STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
@@ -379,6 +380,9 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
 
         t0 = time.perf_counter()
         frame = orient_reconstruction(rec) if cfg.orient else None
+        up = check_model_up(rec) if frame is not None else None  # warns only (docs/poses.md, "World frame")
+        if up is not None and (up_warning := up.warning()) is not None:
+            warnings_.append(up_warning)
         file_paths = {f: relative_file_path(image_dir / f, cfg.out_dir) for f in registered}
         transforms = transforms_dict(rec, {f: source_index.get(f) for f in registered}, file_paths=file_paths)
         if "fl_x" in transforms:
@@ -417,6 +421,7 @@ def import_model(cfg: ImportConfig) -> dict[str, Any]:
             "n_cameras": len(cameras),
             "config": {"min_registered": cfg.min_registered, "orient": cfg.orient},
             "world_frame": None if frame is None else frame.as_dict(),
+            **({} if up is None else {"up_check": up.as_dict()}),
             "warnings": warnings_,
             "timings": timings,
         }

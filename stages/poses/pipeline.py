@@ -21,9 +21,7 @@ from .frame_list import check_name_order, read_frame_list, time_order
 from .known_focal import known_focal
 from .model_export import (
     drop_frames,
-    inlier_points,
     judge_camera_path,
-    point_cloud,
     registered_poses,
     transforms_dict,
     write_model_outputs,
@@ -44,7 +42,7 @@ from .quality_gate import (
 )
 from .sfm import SfmResult, resolve_matcher, run_sfm
 from .static_check import MotionPrecheck, measure_motion
-from .up_check import check_up
+from .up_check import check_model_up
 from .world_frame import orient_reconstruction
 
 STAGE_VERSION = "2"  # 2: the world frame is gravity- and wall-aligned (world_frame.py)
@@ -134,7 +132,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         # a gravity- and wall-aligned world before anything is written, so every output shares it
         frame = orient_reconstruction(rec) if cfg.orient else None
         # a second, independent up (the largest horizontal plane of the points): warns, never turns the world
-        up = check_up(np.asarray(inlier_points(point_cloud(rec)).points)) if frame is not None else None
+        up = check_model_up(rec) if frame is not None else None
         if up is not None and (up_warning := up.warning()) is not None:
             warnings_.append(up_warning)
         # file_path relative to the final folder (not the atomic temp one): ns-train --data POSES resolves it

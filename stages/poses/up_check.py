@@ -14,6 +14,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pycolmap
+
+from .model_export import inlier_points, point_cloud
 
 MAX_TILT_DEG = 20.0
 """Only planes within this angle of the world's z are candidates for the floor or a table top."""
@@ -61,6 +64,11 @@ class UpCheck:
             "noisy point normals); the poses themselves are not judged by this; fix: film more texture on the "
             "floor and walls, or check the scene box and the room's up in the viewer before training"
         )
+
+
+def check_model_up(reconstruction: pycolmap.Reconstruction) -> UpCheck:
+    """``check_up`` of an oriented model's points, stray triangulations left out (as for the scene box)."""
+    return check_up(np.asarray(inlier_points(point_cloud(reconstruction)).points))
 
 
 def check_up(points: np.ndarray, up: np.ndarray | None = None, seed: int = 0) -> UpCheck:

@@ -82,6 +82,7 @@ def test_import_matches_frames_by_number(capture: tuple[Path, Path], tmp_path: P
     assert transforms["fl_x"] == SMALL_CAMERA.fx and transforms["w"] == SMALL_CAMERA.width
     assert (transforms["k1"], transforms["k2"]) == RADIAL_K
     assert summary["source"] == "import"
+    assert summary["up_check"]["n_points"] > 0  # the second up, as `livescene poses` checks its own models
     assert summary["imported_from"]["model"] == str((project / layout).resolve())
     assert summary["imported_from"]["format"] == ("binary" if binary else "text")
     assert summary["registered"] == frame_names and summary["unregistered"] == []
@@ -115,7 +116,7 @@ def test_import_with_the_image_folder(capture: tuple[Path, Path], tmp_path: Path
     # orient=False (--no-orient): the model's own world frame, pose for pose
     summary = import_model(ImportConfig(model_dir=_model(tmp_path, binary=False), out_dir=out, images_dir=source,
                                         orient=False))
-    assert summary["world_frame"] is None
+    assert summary["world_frame"] is None and "up_check" not in summary  # a world kept as given is not checked
     transforms = json.loads((out / "transforms.json").read_text())
     assert [f["file_path"] for f in transforms["frames"]] == [os.path.relpath(source / n, out) for n in COLMAP_NAMES]
     assert all((out / f["file_path"]).is_file() for f in transforms["frames"])
