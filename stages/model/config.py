@@ -315,6 +315,26 @@ class TrainConfig:
     and replay them, one launch per step instead of ~2,500 ops' kernels (step_graphs.py; on an H200 1.8x the
     eager rays/s). A run that compiles its fields or scales an fp16 loss trains eagerly, and says so. Ignored on
     the CPU."""
+    camera_opt: Literal["off", "SO3xR3"] = "off"
+    """Refine the training cameras while training: ``SO3xR3`` learns a rotation and a translation per training frame,
+    applied to its rays, with an Adam of its own (nerfacto's camera optimiser; docs/model.md, "Camera refinement").
+    Off by default: a run without it has none of its keys in its config and trains as before. A refined run's
+    held-out views are aligned to the refined world before they are scored (the evaluation's ``pose_alignment``)."""
+    camera_opt_lr: float = 1e-3
+    """Peak learning rate of the corrections (nerfacto: 1e-3), decayed exponentially to ``camera_opt_lr_final``."""
+    camera_opt_lr_final: float = 1e-4
+    """The corrections' learning rate at the last step (nerfacto: 1e-4)."""
+    camera_opt_translation_penalty: float = 1e-2
+    """Weight of the mean length of the translation corrections (normalised scene units) in the loss (nerfacto 1e-2):
+    it keeps the corrections, whose common part no image constrains, small."""
+    camera_opt_rotation_penalty: float = 1e-3
+    """Weight of the mean rotation angle of the corrections (radians) in the loss (nerfacto 1e-3)."""
+
+
+CAMERA_OPT_KEYS = ("camera_opt", "camera_opt_lr", "camera_opt_lr_final", "camera_opt_translation_penalty",
+                   "camera_opt_rotation_penalty")
+"""The ``train`` keys of camera refinement: a run with ``camera_opt: off`` records none of them (its config.yaml,
+checkpoints and model.pt are byte for byte those of a run before the option existed)."""
 
 
 @dataclass
@@ -358,7 +378,11 @@ class RunConfig:
     """Floors under which the report calls a run undertrained or untrustworthy."""
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        out = dataclasses.asdict(self)
+        if self.train.camera_opt == "off":  # absent means off (config_from_dict fills the defaults back in)
+            for key in CAMERA_OPT_KEYS:
+                del out["train"][key]
+        return out
 
 
 def preset_path(preset: str) -> Path:
@@ -463,7 +487,8 @@ TRAIN_RANGES: dict[str, tuple[float, str]] = {
     "checkpoint_every": (0, "steps (0 = only at the end)"), "keep_checkpoints": (0, "checkpoints, e.g. 2"),
     "max_steps": (1, "steps"), "max_seconds": (0, "seconds (0 = no budget)"), "eval_every": (0, "steps (0 = never)"),
     "warmup_steps": (0, "steps"), "lr_final_ratio": (0, "a ratio, e.g. 0.0"), "threads": (0, "threads (0 = torch's)"),
-    "max_nonfinite": (0, "steps, e.g. 20"),
+    "max_nonfinite": (0, "steps, e.g. 20"), "camera_opt_translation_penalty": (0, "a weight, e.g. 0.01"),
+    "camera_opt_rotation_penalty": (0, "a weight, e.g. 0.001"),
 }
 """Least value of each numeric ``train`` field and what it counts: types are checked per source, ranges here."""
 
@@ -475,11 +500,11 @@ def _check_ranges(config: RunConfig, preset: Path) -> None:
         if not math.isfinite(value) or value < least:
             raise InputError(f"train.{name}", f"{value} is out of range (in {preset} or a --set item)",
                              f"give {'a positive' if least else 'a non-negative'} number of {what}")
-    for name in ("lr", "adam_eps"):
+    for name in ("lr", "adam_eps", "camera_opt_lr", "camera_opt_lr_final"):
         value = getattr(config.train, name)
         if not (math.isfinite(value) and 0 < value <= 10):
             raise InputError(f"train.{name}", f"{value} is not a finite value in (0, 10] (in {preset} or a --set "
-                             "item)", "give e.g. train.lr=0.02, train.adam_eps=1e-12")
+                             "item)", "give e.g. train.lr=0.02, train.adam_eps=1e-12, train.camera_opt_lr=0.001")
     for key, problem, fix in _model_problems(config.model):
         raise InputError(f"model.{key}", f"{problem} (in {preset}, its method overlay or a --set item)", fix)
 

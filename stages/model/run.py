@@ -18,7 +18,7 @@ import json
 import pickle
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -28,6 +28,7 @@ from stages.scene import Camera, InputError, generate_rays, read_yaml_mapping
 
 from .allocator import keep_freed_memory
 from .appearance_choice import EXPOSURE_FILE
+from .camera_opt import ALIGN_LR, ALIGN_RAYS, ALIGN_STEPS, align_rays, corrected_c2w
 from .chunk_threads import map_chunks
 from .config import RunConfig, config_from_dict
 from .methods import SceneInfo, build_model
@@ -61,6 +62,49 @@ class LoadedRun:
         self.frame_ids = list(payload.get("frame_ids", []))
         self.step = int(payload["step"])
         self.language_encoder = payload.get("language_encoder")
+        self.camera_opt: dict[str, Any] | None = payload.get("camera_opt")
+        """The training cameras' corrections (``train.camera_opt``): mode, frame ids, ``[frames, 6]``; None when off."""
+
+    @property
+    def refined_cameras(self) -> bool:
+        """Whether training refined its cameras: the world then moved off the dataset's poses, and a held-out view is
+        scored at its pose aligned to the run (``align_pose``; docs/model.md, "Camera refinement")."""
+        return self.camera_opt is not None
+
+    ALIGNMENT: ClassVar[dict[str, float]] = {"steps": ALIGN_STEPS, "rays_per_step": ALIGN_RAYS, "lr": ALIGN_LR}
+    """The alignment's fixed settings, as metrics.json records them."""
+
+    def align_pose(self, camera: Camera, c2w: np.ndarray, image: np.ndarray, states: States = None,
+                   frame_index: int | None = None, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """The pose of ``camera`` near ``c2w`` (dataset world) at which this run best renders ``image`` [H, W, 3]
+        with ``states``: a correction (as training's, ``[t, w]`` in the normalised scene) optimised with the model
+        frozen, ``ALIGN_STEPS`` Adam steps on ``ALIGN_RAYS`` pixels each, drawn by a generator seeded with ``seed``
+        (the same pose every time on one machine). Returns the aligned camera-to-world and the correction."""
+        state = self.state_vector(states, frame_index)
+        origins, dirs = generate_rays(camera, np.asarray(c2w, dtype=np.float64))
+        o = torch.tensor(self.norm.points(origins.reshape(-1, 3)), dtype=torch.float32, device=self.device)
+        d = torch.tensor(dirs.reshape(-1, 3), dtype=torch.float32, device=self.device)
+        d = d / d.norm(dim=-1, keepdim=True)
+        target = torch.tensor(np.asarray(image, dtype=np.float32).reshape(-1, 3), device=self.device)
+        st = torch.tensor(state, dtype=torch.float32, device=self.device)
+        t = self.frame_time(frame_index) if frame_index is not None else 0.0
+
+        def render(rays: RayBundle) -> torch.Tensor:
+            n = len(rays)
+            rays.states = st.expand(n, self.info.n_objects)
+            rays.times = torch.full((n,), float(t), device=self.device)
+            return self.model(rays, step=self.step, outputs=("rgb",))["rgb"]
+
+        frozen = [p for p in self.model.parameters() if p.requires_grad]
+        for p in frozen:  # gradients reach the correction only
+            p.requires_grad_(False)
+        try:
+            with torch.inference_mode(False), torch.enable_grad():
+                adjustment = align_rays(render, o, d, target, self.config.model.sampling.near_plane, seed)
+        finally:
+            for p in frozen:
+                p.requires_grad_(True)
+        return corrected_c2w(c2w, adjustment, self.norm), adjustment
 
     @property
     def objects(self) -> list[str]:

@@ -30,6 +30,9 @@ def build_parser(prog: str = "livescene train") -> argparse.ArgumentParser:
     p.add_argument("--max-steps", type=int, help="optimisation steps (overrides the preset)")
     p.add_argument("--seed", type=int, help="seed of every random generator (default 0)")
     p.add_argument("--device", default="auto", help="auto | cpu | cuda (default auto)")
+    p.add_argument("--camera-opt", choices=["off", "SO3xR3"],
+                   help="refine the training cameras while training (SO3xR3: a rotation and a translation per "
+                        "training frame; default off, as train.camera_opt; docs/model.md \"Camera refinement\")")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config field, e.g. --set train.batch_rays=2048 (repeatable)")
     p.add_argument("--resume", action="store_true",
@@ -62,6 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         overrides.append(f"train.max_seconds={args.max_seconds}")
     if args.max_steps is not None:
         overrides.append(f"train.max_steps={args.max_steps}")
+    if args.camera_opt is not None:  # quoted: YAML would read a bare off as false
+        overrides.append(f"train.camera_opt='{args.camera_opt}'")
     config = load_config(args.preset, overrides, method=args.method, seed=args.seed, data=args.data,
                          language_targets=args.language_targets, exposure=args.exposure)
     trainer = Trainer(config, args.out, device=args.device, resume=args.resume, progress=not args.no_progress,

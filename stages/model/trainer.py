@@ -44,6 +44,7 @@ from stages.scene.machine import machine_info
 
 from .allocator import keep_freed_memory
 from .appearance_choice import EXPOSURE_FILE, resolve_appearance
+from .camera_opt import CameraCorrections, correction_size, exponential_factor
 from .config import LossWeights, RunConfig
 from .language_targets import LanguageTargets
 from .methods import SceneInfo, build_model
@@ -303,10 +304,13 @@ class Trainer:
         self._compiled_graphs = cfg.train.compile and cfg.train.compile_mode == "reduce-overhead" \
             and self.device.type == "cuda"
         self.step_graphs = None
+        self.cameras = self._camera_corrections() if cfg.train.camera_opt != "off" else None
         if cfg.train.cuda_graphs and self.device.type == "cuda":
-            # compiled fields bring their own graphs; fp16's loss scaler decides on the host at every step
+            # compiled fields bring their own graphs; fp16's loss scaler decides on the host at every step; the
+            # corrections' own Adam and schedule are not part of a captured step
             eager_why = "train.compile is on" if cfg.train.compile else \
-                "fp16 autocast scales the loss" if self.amp_dtype == torch.float16 else ""
+                "fp16 autocast scales the loss" if self.amp_dtype == torch.float16 else \
+                "train.camera_opt is on (the captured step holds no camera corrections)" if self.cameras else ""
             if eager_why:
                 print(f"train.cuda_graphs: eager steps, since {eager_why}", file=sys.stderr)
             else:
@@ -314,6 +318,9 @@ class Trainer:
         if self.language is not None:
             self.language = self.language.to(self.device)
         self._named_params = [(n, p) for n, p in self.model.named_parameters() if p.requires_grad]
+        # every parameter whose gradient the step's finite check reads: the model's, then the camera corrections'
+        self._checked_params = self._named_params + ([("camera_opt.adjustment", self.cameras.adjustment)]
+                                                     if self.cameras is not None else [])
         # fused Adam takes the step's finite check as a device tensor (found_inf) and skips the update on the
         # device: no host sync decides whether a step counts
         self.optimizer = torch.optim.Adam([p for _, p in self._named_params], lr=cfg.train.lr,
@@ -322,6 +329,13 @@ class Trainer:
         self.time_fraction = 0.0  # share of train.max_seconds spent (0 without a budget); drives the decay too
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
             self.optimizer, lambda s: lr_factor(s, t.warmup_steps, t.max_steps, t.lr_final_ratio, self.time_fraction))
+        self.camera_optimizer = self.camera_scheduler = None
+        if self.cameras is not None:  # its own Adam and exponential decay (docs/model.md, "Camera refinement")
+            self.camera_optimizer = torch.optim.Adam(self.cameras.parameters(), lr=t.camera_opt_lr, eps=1e-15,
+                                                     fused=True)
+            self.camera_scheduler = torch.optim.lr_scheduler.LambdaLR(
+                self.camera_optimizer, lambda s: exponential_factor(s, t.max_steps, t.camera_opt_lr_final
+                                                                    / t.camera_opt_lr, self.time_fraction))
         # fp16 has too few exponent bits for small gradients: scale the loss (bf16 needs no scaler)
         self.scaler = torch.amp.GradScaler(self.device.type) if self.amp_dtype == torch.float16 else None
         self.ray_generator = torch.Generator().manual_seed(cfg.seed)
@@ -336,6 +350,30 @@ class Trainer:
         self._t0 = time.perf_counter()
         self.log_rows: list[dict[str, Any]] = []
         self.last_eval_miou: float | None = None
+
+    def _camera_corrections(self) -> CameraCorrections:
+        """A zero correction per training frame (``train.camera_opt``), looked up by the rays' dataset frame index."""
+        rows = torch.full((len(self.ds.frames),), -1, dtype=torch.long)
+        rows[self.train_rays.frame_index.cpu()] = torch.arange(len(self.train_rays.frames))
+        return CameraCorrections(rows, len(self.train_rays.frames)).to(self.device)
+
+    def camera_summary(self) -> dict[str, Any] | None:
+        """run.json's account of the refined cameras: the mode and the corrections' sizes (None when off)."""
+        if self.cameras is None:
+            return None
+        sizes = [correction_size(a, self.norm) for a in self.cameras.adjustment.detach().cpu().double().numpy()]
+        rot = [s["rotation_deg"] for s in sizes]
+        trans = [s["translation"] for s in sizes]
+        return {"mode": self.config.train.camera_opt, "frames": len(sizes),
+                "rotation_deg": {"mean": float(np.mean(rot)), "max": float(np.max(rot))},
+                "translation": {"mean": float(np.mean(trans)), "max": float(np.max(trans)),
+                                "unit": "dataset units"}}
+
+    def camera_payload(self) -> dict[str, Any]:
+        """model.pt's record of the refined cameras (what the evaluation's pose alignment reads)."""
+        return {"mode": self.config.train.camera_opt,
+                "frame_ids": [f.frame_id for f in self.train_rays.frames],
+                "adjustment": self.cameras.adjustment.detach().cpu().clone()}
 
     def _data_tensors(self) -> dict[str, Any]:
         """Everything of the dataset that training reads, as tensors: the checkpoint's data digest covers these."""
@@ -384,6 +422,10 @@ class Trainer:
             "code_digest": code_digest(),
             "device_type": self.device.type,  # whose generator the jitter state is
         }
+        if self.cameras is not None:
+            state["camera_opt"] = {"corrections": self.cameras.state_dict(),
+                                   "optimizer": self.camera_optimizer.state_dict(),
+                                   "scheduler": self.camera_scheduler.state_dict()}
         path = self.checkpoint_path(self.step)
         save_atomically(state, path)
         kept = sorted((self.out / "checkpoints").glob("step_*.pt"))
@@ -444,6 +486,10 @@ class Trainer:
             # a CUDA graph run saves Adam capturable with a float32 device-tensor lr: resume in the eager form, at
             # the schedule's exact value (a capture converts again)
             group["capturable"], group["lr"] = False, self.last_lr()
+        if self.cameras is not None:  # a checkpoint without them is of another config: stale_reason refused it
+            self.cameras.load_state_dict(state["camera_opt"]["corrections"])
+            self.camera_optimizer.load_state_dict(state["camera_opt"]["optimizer"])
+            self.camera_scheduler.load_state_dict(state["camera_opt"]["scheduler"])
         if self.scaler is not None and state.get("scaler"):
             self.scaler.load_state_dict(state["scaler"])
         # generator states are CPU byte tensors, whatever the generator's device; a checkpoint loaded onto CUDA
@@ -489,25 +535,38 @@ class Trainer:
         is skipped on the device (fused Adam's ``found_inf`` leaves weights, moments and step count as they
         were). Eager steps and CUDA graph captures (step_graphs.py) run this same code.
         """
+        rays = batch.rays
+        if self.cameras is not None:  # each ray moved by its training frame's correction (float32, before autocast)
+            rays = self.cameras.correct(rays, batch.frames, self.config.model.sampling.near_plane)
         with self._autocast(cache_casts):
-            out = self.model(batch.rays, step=step, generator=self.jitter_generator, anneal=anneal)
+            out = self.model(rays, step=step, generator=self.jitter_generator, anneal=anneal)
             terms = self.model.loss_dict(out, batch, step, self.language)
+        if self.cameras is not None:  # a term of the sum, not a column of train_log.csv
+            t = self.config.train
+            terms["camera_opt"] = self.cameras.penalty(t.camera_opt_translation_penalty, t.camera_opt_rotation_penalty)
         names = list(terms)
         values = torch.stack([terms[n].float() for n in names])
         terms_ok = torch.isfinite(values)
         self.optimizer.zero_grad(set_to_none=True)
+        if self.camera_optimizer is not None:
+            self.camera_optimizer.zero_grad(set_to_none=True)
         loss = values.sum()
         if self.scaler is not None:
             self.scaler.scale(loss).backward()
             self.scaler.unscale_(self.optimizer)
+            if self.camera_optimizer is not None:
+                self.scaler.unscale_(self.camera_optimizer)
         else:
             loss.backward()
-        with_grad = [(n, p) for n, p in self._named_params if p.grad is not None]
+        with_grad = [(n, p) for n, p in self._checked_params if p.grad is not None]
         grads_ok = torch.isfinite(torch.stack(torch._foreach_norm([p.grad for _, p in with_grad]))) if with_grad \
             else terms_ok[:0]
         bad = ~(terms_ok.all() & grads_ok.all())
         self.optimizer.found_inf = bad.float()
         self.optimizer.step()
+        if self.camera_optimizer is not None:  # skipped on the device with the model's step
+            self.camera_optimizer.found_inf = self.optimizer.found_inf
+            self.camera_optimizer.step()
         return names, torch.cat([values.detach(), loss.detach()[None]]), terms_ok, [n for n, _ in with_grad], grads_ok
 
     def train_step(self) -> PendingStep:
@@ -541,6 +600,8 @@ class Trainer:
             if self.step_graphs is not None:
                 self.step_graphs.eager_step_done()
         self.scheduler.step()
+        if self.camera_scheduler is not None:
+            self.camera_scheduler.step()
         pending = PendingStep(self.step, names, values, terms_ok, grad_names, grads_ok,
                               self.wall_before + time.perf_counter() - self._t0, self.last_lr())
         self._pending.append(pending)
@@ -792,6 +853,8 @@ class Trainer:
             "step": self.step,
             "language_encoder": self.language.encoder if self.language else None,
         }
+        if self.cameras is not None:  # absent when off: model.pt as before the option existed
+            payload["camera_opt"] = self.camera_payload()
         save_atomically(payload, self.out / "model.pt")
         if self.log_gains is not None:
             write_json(self.out / EXPOSURE_FILE, {"spread": self.appearance.get("spread"), "log_gains": self.log_gains})
@@ -827,6 +890,8 @@ class Trainer:
             "seed": cfg.seed,
             "rays_per_step": cfg.train.batch_rays,
         }
+        if self.cameras is not None:
+            run["camera_opt"] = self.camera_summary()
         if self.key_frame_ranges:  # key values in a unit of the annotator's, mapped to [0, 1]
             run["key_frame_ranges"] = self.key_frame_ranges
         if self.ds.split_note:

@@ -73,7 +73,7 @@ def test_region_weighted_language_equals_per_sample_lookup(mode, interpolate_by,
         assert states.grad is None  # neither formulation sends a gradient into the states
 
 
-@pytest.mark.parametrize("extra", [[], ["model.state.mode=learned"]])
+@pytest.mark.parametrize("extra", [[], ["model.state.mode=learned"], ["train.camera_opt=SO3xR3"]])
 def test_training_steps_between_log_intervals_make_no_host_sync(tiny_dataset, tmp_path, tiny_config, extra):
     targets = random_language_targets(tmp_path / "targets.npz", tiny_dataset.objects, DIM)
     cfg = tiny_config(tiny_dataset.root, *extra, steps=20)
