@@ -149,6 +149,9 @@ class Evaluator:
         """Wall-clock numbers of the last evaluation (timings.json), kept out of the metrics."""
         self._masks: dict[str, np.ndarray] = {}
         """Object masks by frame id: loaded (or truth-rendered) once for the region split and the grounding."""
+        self._aligned: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        """A refined run's aligned pose and correction by frame id, found once and used by every render there."""
+        self.align_seconds = 0.0
         run_objects = list(getattr(run, "objects", dataset.objects))
         if run_objects != list(dataset.objects):
             raise InputError(dataset.root / "mapping.yaml", f"the run's objects {run_objects} differ from the "
@@ -164,8 +167,43 @@ class Evaluator:
                 rgb_only: bool = False) -> dict[str, np.ndarray]:
         """The run's render of ``frame``'s view; ``rgb_only`` takes the model's fast path (no probs, no language)."""
         extra = {"outputs": ("rgb",)} if rgb_only else {}
-        return self.run.render(self._camera(frame), np.asarray(frame.c2w, float), states,
-                               frame_index=self._run_index(frame), **extra)
+        return self.run.render(self._camera(frame), self._pose(frame), states, frame_index=self._run_index(frame),
+                               **extra)
+
+    @property
+    def refined(self) -> bool:
+        """Whether the run refined its training cameras (its world moved off the dataset's poses)."""
+        return bool(getattr(self.run, "refined_cameras", False))
+
+    def _pose(self, frame: Frame) -> np.ndarray:
+        """The pose every render of ``frame``'s view uses: the dataset's, or for a run that refined its cameras that
+        pose aligned to the run against the view's own image (docs/model.md, "Camera refinement"), once per view."""
+        c2w = np.asarray(frame.c2w, float)
+        if not self.refined:
+            return c2w
+        if frame.frame_id not in self._aligned:
+            t0 = time.perf_counter()
+            image = self._image(frame)
+            gains = getattr(self.run, "exposure_gains", None) or {}
+            if frame.frame_id in gains:  # the run renders the nominal exposure
+                image = np.clip(image * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
+            learned = getattr(self.run, "state_mode", "given") == "learned"
+            self._aligned[frame.frame_id] = self.run.align_pose(
+                self._camera(frame), c2w, image, None if learned else frame.state, frame_index=self._run_index(frame),
+                seed=self.ds.frames.index(frame))
+            self.align_seconds += time.perf_counter() - t0
+        return self._aligned[frame.frame_id][0]
+
+    def pose_alignment(self) -> dict[str, Any]:
+        """metrics.json's record of the protocol: the alignment's settings and each aligned view's correction."""
+        from stages.model.camera_opt import correction_size
+
+        views = [{"frame": fid, **correction_size(adj, self.run.norm)} for fid, (_, adj) in self._aligned.items()]
+        return {"protocol": "each held-out view's pose aligned to the refined run (test-time optimisation of its "
+                            "correction, model frozen, against the view's image) before every render there",
+                **getattr(self.run, "ALIGNMENT", {}), "training_cameras": self.run.camera_opt["mode"],
+                "views": views, "rotation_deg": summarize([v["rotation_deg"] for v in views]),
+                "translation": summarize([v["translation"] for v in views]), "translation_unit": "dataset units"}
 
     def _run_index(self, frame: Frame) -> int | None:
         """The run's index of ``frame``, by id (a dataset given in another order names the same frames)."""
@@ -213,6 +251,7 @@ class Evaluator:
         gains = getattr(self.run, "exposure_gains", None) or {}
         for frame in tqdm(frames, desc="held-out views", unit="view", disable=not self.config.progress):
             gt = self._image(frame)
+            self._pose(frame)  # a refined run's alignment, timed apart from the render
             t0 = time.perf_counter()
             out = self._render(frame, None if learned else frame.state)
             render_seconds += time.perf_counter() - t0
@@ -566,6 +605,10 @@ class Evaluator:
         self.timings["grounding"] = {"seconds": t3 - t2}
         self.timings["seconds"] = t4 - t0  # every part, locality included
         self.timings["machine"] = machine_info(str(getattr(self.run, "device", "cpu")))
+        # only a refined run's metrics carry the protocol: an unrefined one's are as before the option existed
+        aligned = {"pose_alignment": self.pose_alignment()} if self.refined else {}
+        if self.refined:
+            self.timings["pose_alignment"] = {"seconds": self.align_seconds, "views": len(self._aligned)}
         return {
             "evaluate_version": EVALUATE_VERSION,
             "dataset": str(self.ds.root),
@@ -576,6 +619,7 @@ class Evaluator:
             "unseen_combinations": unseen,
             "grounding": grounding,
             "locality": local,
+            **aligned,
         }
 
 
