@@ -242,6 +242,22 @@ def _scale_note(sd: SceneData) -> str:
             "docs/workflow.md, \"Evaluation budget\").")
 
 
+def _pose_alignment_note(sd: SceneData) -> str:
+    """Which runs refined their training cameras and so were scored at aligned held-out poses (docs/model.md,
+    "Camera refinement"); nothing for runs that did not."""
+    parts = []
+    for m in sd.methods:
+        pa = (m.metrics or {}).get("pose_alignment")
+        if not isinstance(pa, dict):
+            continue
+        rot = (pa.get("rotation_deg") or {}).get("mean")
+        size = f", mean correction {fmt(rot, 2)} degrees" if isinstance(rot, (int, float)) else ""
+        parts.append(f"{escape(m.name)} ({escape(str(pa.get('training_cameras')))}: each held-out pose aligned by "
+                     f"{escape(str(pa.get('steps')))} steps against its image, model frozen{size})")
+    return (" Refined training cameras: " + "; ".join(parts) + "; their held-out, unseen-combination and grounding "
+            "numbers are at those aligned poses, the others' at the dataset's.") if parts else ""
+
+
 APPEARANCE_WORDS = {"affine": "a colour correction learned per training frame",
                     "measured": "each training image divided by its measured exposure gains",
                     "none": "the images as they are"}
@@ -307,7 +323,7 @@ def section_methods(sd: SceneData) -> str:
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names, held-out accumulation "
             "over object pixels: objects mostly transparent are painted on what lies behind them) or whose "
             "training did not complete is flagged, and its numbers are not results. "
-            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd) + _machines_note(sd)
+            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd) + _pose_alignment_note(sd) + _machines_note(sd)
             + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}." for why, names in lpips_missing.items())
             + "</p>"
             + _flag_banner(flags)
