@@ -207,3 +207,14 @@ def test_alignment_leaves_a_view_that_fits_at_its_pose():
     target = render(RayBundle(origins, directions, origins[:, 0], origins[:, 0]))
     found = align_rays(render, origins, directions, target, 0.05, seed=0)
     np.testing.assert_array_equal(found, np.zeros(6))
+
+
+@pytest.mark.parametrize("mode", ["SO3xR3", "off"])
+def test_the_train_cli_takes_camera_opt(tiny_dataset, tmp_path, tiny_overrides, mode):
+    from stages.model.train_cli import main as train_main
+
+    sets = [a for o in tiny_overrides for a in ("--set", o)]
+    args = ["--data", str(tiny_dataset.root), "--out", str(tmp_path / "run"), "--max-steps", "2", "--device", "cpu"]
+    assert train_main([*args, *sets, "--camera-opt", mode, "--no-progress"]) == 0
+    train = yaml.safe_load((tmp_path / "run" / "config.yaml").read_text())["train"]
+    assert train.get("camera_opt", "off") == mode
