@@ -194,7 +194,7 @@ class Evaluator:
             self.align_seconds += time.perf_counter() - t0
         return self._aligned[frame.frame_id][0]
 
-    def pose_alignment(self) -> dict[str, Any]:
+    def view_alignment(self) -> dict[str, Any]:
         """metrics.json's record of the protocol: the alignment's settings and each aligned view's correction."""
         from stages.model.camera_opt import correction_size
 
@@ -606,9 +606,9 @@ class Evaluator:
         self.timings["seconds"] = t4 - t0  # every part, locality included
         self.timings["machine"] = machine_info(str(getattr(self.run, "device", "cpu")))
         # only a refined run's metrics carry the protocol: an unrefined one's are as before the option existed
-        aligned = {"pose_alignment": self.pose_alignment()} if self.refined else {}
+        aligned = {"view_alignment": self.view_alignment()} if self.refined else {}
         if self.refined:
-            self.timings["pose_alignment"] = {"seconds": self.align_seconds, "views": len(self._aligned)}
+            self.timings["view_alignment"] = {"seconds": self.align_seconds, "views": len(self._aligned)}
         return {
             "evaluate_version": EVALUATE_VERSION,
             "dataset": str(self.ds.root),

@@ -319,7 +319,7 @@ class TrainConfig:
     """Refine the training cameras while training: ``SO3xR3`` learns a rotation and a translation per training frame,
     applied to its rays, with an Adam of its own (nerfacto's camera optimiser; docs/model.md, "Camera refinement").
     Off by default: a run without it has none of its keys in its config and trains as before. A refined run's
-    held-out views are aligned to the refined world before they are scored (the evaluation's ``pose_alignment``)."""
+    held-out views are aligned to the refined world before they are scored (the evaluation's ``view_alignment``)."""
     camera_opt_lr: float = 1e-3
     """Peak learning rate of the corrections (nerfacto: 1e-3), decayed exponentially to ``camera_opt_lr_final``."""
     camera_opt_lr_final: float = 1e-4

@@ -242,12 +242,12 @@ def _scale_note(sd: SceneData) -> str:
             "docs/workflow.md, \"Evaluation budget\").")
 
 
-def _pose_alignment_note(sd: SceneData) -> str:
+def _view_alignment_note(sd: SceneData) -> str:
     """Which runs refined their training cameras and so were scored at aligned held-out poses (docs/model.md,
     "Camera refinement"); nothing for runs that did not."""
     parts = []
     for m in sd.methods:
-        pa = (m.metrics or {}).get("pose_alignment")
+        pa = (m.metrics or {}).get("view_alignment")
         if not isinstance(pa, dict):
             continue
         rot = (pa.get("rotation_deg") or {}).get("mean")
@@ -323,7 +323,7 @@ def section_methods(sd: SceneData) -> str:
             "floors (steps, held-out PSNR, grounding mIoU of probabilities on object names, held-out accumulation "
             "over object pixels: objects mostly transparent are painted on what lies behind them) or whose "
             "training did not complete is flagged, and its numbers are not results. "
-            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd) + _pose_alignment_note(sd) + _machines_note(sd)
+            + _ssim_form(sd) + _scale_note(sd) + _exposure_note(sd) + _view_alignment_note(sd) + _machines_note(sd)
             + "".join(f" LPIPS of {escape(', '.join(names))}: {escape(why)}." for why, names in lpips_missing.items())
             + "</p>"
             + _flag_banner(flags)

@@ -326,13 +326,13 @@ def test_timings_list_the_jobs_of_the_plan_only(tmp_path, tiny_dataset):
 def test_runs_scored_at_aligned_poses_are_named_in_the_methods_note():
     from types import SimpleNamespace
 
-    from stages.report.scene_page import _pose_alignment_note
+    from stages.report.scene_page import _view_alignment_note
 
-    refined = SimpleNamespace(name="livescene", metrics={"pose_alignment": {
+    refined = SimpleNamespace(name="livescene", metrics={"view_alignment": {
         "training_cameras": "SO3xR3", "steps": 100, "rotation_deg": {"mean": 0.25}}})
     plain = SimpleNamespace(name="mk-planes", metrics={"held_out": {}})
-    assert _pose_alignment_note(SimpleNamespace(methods=[refined, plain])) == (
+    assert _view_alignment_note(SimpleNamespace(methods=[refined, plain])) == (
         " Refined training cameras: livescene (SO3xR3: each held-out pose aligned by 100 steps against its image, "
         "model frozen, mean correction 0.25 degrees); their held-out, unseen-combination and grounding numbers are at "
         "those aligned poses, the others' at the dataset's.")
-    assert _pose_alignment_note(SimpleNamespace(methods=[plain])) == ""
+    assert _view_alignment_note(SimpleNamespace(methods=[plain])) == ""

@@ -51,7 +51,7 @@ def test_a_refined_run_is_scored_at_aligned_poses(eval_scene, tmp_path):
     assert len(run.poses) > len(test_indices)  # unseen combinations and locality render the same views again
     for index, c2w in run.poses:  # every render at a view is at its aligned pose
         np.testing.assert_allclose(c2w[:3, 3], np.asarray(ds.frames[index].c2w)[:3, 3] + [SHIFT, 0.0, 0.0])
-    record = metrics["pose_alignment"]
+    record = metrics["view_alignment"]
     assert record["steps"] == 100 and record["training_cameras"] == "SO3xR3"
     assert [v["frame"] for v in record["views"]] == [ds.frames[i].frame_id for i in test_indices]
     for view in record["views"]:
@@ -65,6 +65,6 @@ def test_an_unrefined_run_is_scored_at_the_datasets_poses(eval_scene, tmp_path):
     render = run.render
     run.render = lambda camera, c2w, *a, **k: poses.append(np.array(c2w)) or render(camera, c2w, *a, **k)
     metrics = evaluate_run(run, ds, tmp_path / "e", truth, None, EvaluateConfig(unseen_views=2, save_renders=False))
-    assert "pose_alignment" not in metrics
+    assert "view_alignment" not in metrics
     test_poses = [np.asarray(f.c2w) for f in ds.frames if f.split == "test"]
     assert poses and all(any(np.array_equal(p, t) for t in test_poses) for p in poses)
