@@ -592,6 +592,19 @@ def test_appearance_correction_reaches_every_training(workflow_copy):
         assert len(plan["exposure"]) == 1 and all("--exposure results/demo/exposure.json" in t for t in jobs)
 
 
+def test_camera_refinement_reaches_every_training_only_when_asked(workflow_copy):
+    """train.camera_opt "off" (the default) leaves the training command as it was; SO3xR3 reaches every method's;
+    a bare YAML off (false) is refused by the schema, not read as a mode."""
+    jobs = workflow_copy.dry_run().scene_jobs("demo")["train"]
+    assert len(jobs) == 3 and not any("--camera-opt" in t for t in jobs)
+    chosen = workflow_copy.write_config(train={"camera_opt": "SO3xR3"})
+    jobs = workflow_copy.dry_run("--configfile", str(chosen)).scene_jobs("demo")["train"]
+    assert len(jobs) == 3 and all("--camera-opt SO3xR3" in t for t in jobs)
+    bare = workflow_copy.write_config(train={"camera_opt": False})
+    failed = workflow_copy.snakemake("-n", "--cores", "2", "--configfile", str(bare))
+    assert failed.code != 0 and "camera_opt" in failed.output
+
+
 def test_sheet_cells_that_only_look_wrong_are_accepted(workflow_copy, tmp_path):
     """A spreadsheet's BOM, `*` in state_ranges, a mapping.yaml one folder above the id maps, one mask folder per
     object (named by its folders) with `names: no`, and a COLMAP model folder with a colon in its path."""

@@ -161,6 +161,8 @@ def train_args(wildcards):
         args.append("--state-mode learned")
     # always named: a preset file of the user's that sets model.appearance.mode must not win over the workflow key
     args.append(f"--set model.appearance.mode={config['train']['appearance']}")
+    if config["train"]["camera_opt"] != "off":  # named only when on: the default job's command stays as it was
+        args.append(f"--camera-opt {config['train']['camera_opt']}")
     if "exposure" in files:  # measured once per scene (rule exposure), not once per method
         args.append(f"--exposure {q(files['exposure'])}")
     return " ".join(args)
