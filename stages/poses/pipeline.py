@@ -17,6 +17,7 @@ from stages.scene import atomic_dir, write_json
 from .camera_motion import FeatureMotion, feature_motion, keypoint_counts
 from .colmap_masks import write_colmap_masks
 from .config import PosesConfig
+from .focal_check import check_model_focal
 from .frame_list import check_name_order, read_frame_list, time_order
 from .known_focal import known_focal
 from .model_export import (
@@ -135,6 +136,11 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         up = check_model_up(rec) if frame is not None else None
         if up is not None and (up_warning := up.warning()) is not None:
             warnings_.append(up_warning)
+        # does the motion determine the focal length? (a camera that does not turn leaves it free; warns only)
+        focal_check = check_model_focal(rec, ordered, "estimated" if focal is None else
+                                        "given, refined" if focal.refine else "given")
+        if (focal_warning := focal_check.warning()) is not None:
+            warnings_.append(focal_warning)
         # file_path relative to the final folder (not the atomic temp one): ns-train --data POSES resolves it
         transforms = transforms_dict(rec, frames.source_index, image_dir=frames.image_dir, out_dir=cfg.out_dir)
         if focal is not None:  # only then: a run without one writes what it always wrote
@@ -183,6 +189,7 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
                        "loop_detection": cfg.vocab_tree is not None, "orient": cfg.orient},
             "world_frame": None if frame is None else frame.as_dict(),
             **({} if up is None else {"up_check": up.as_dict()}),
+            "focal_check": focal_check.as_dict(),
             "warnings": warnings_,
             "timings": timings,
         }

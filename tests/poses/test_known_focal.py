@@ -82,3 +82,6 @@ def test_a_given_focal_is_kept_and_recorded(room_sequence: Room, tmp_path: Path)
     assert transforms["focal_given"]["refined"] is False
     assert summary["camera"]["params"][0] == 104.0 and summary["camera"]["focal_given"] == transforms["focal_given"]
     assert summary["registered_fraction"] == 1.0
+    # a focal kept as given is not judged by the focal check (docs/poses.md, "Known focal length")
+    assert summary["focal_check"]["focal"] == "given" and summary["focal_check"]["focal_px"] == 104.0
+    assert summary["focal_check"]["poorly_constrained"] is False

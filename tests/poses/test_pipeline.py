@@ -39,6 +39,10 @@ def test_outputs_follow_the_contract(room_poses: Path, room_sequence: Room) -> N
     assert summary["mean_reprojection_error"] < 1.0 and summary["n_points3D"] > 100
     assert {"extract", "match", "map", "total"} <= set(summary["timings"])
     assert summary["masks"]["frames_with_masks"] == len(names) and summary["warnings"] == []
+    # the 70-degree arc turns the view: the focal length is constrained (docs/poses.md, "Known focal length")
+    check = summary["focal_check"]
+    assert check["focal"] == "estimated" and check["poorly_constrained"] is False and check["n_cameras"] == len(names)
+    assert check["axis_spread_deg"] > check["warn_below_deg"]
     assert {p.name for p in (room_poses / "sparse" / "0").iterdir()} >= {"cameras.bin", "images.bin",
                                                                           "points3D.bin"}
     assert not (room_poses / "colmap_work").exists()
