@@ -264,7 +264,7 @@ class ImageFolderSource:
     def __iter__(self) -> Iterator[SourceFrame | DroppedFrame]:
         """Each file is read once, checked from its bytes (empty, truncated JPEG, damaged PNG) and decoded
         once with the decoder's stderr captured; a file that fails any of this is a DroppedFrame."""
-        shape = None
+        shape, first, read = None, None, 0
         with StderrCapture() as stderr:
             for position, (path, index) in enumerate(zip(self.files, self.indices, strict=True)):
                 stamp = index / self.fps
@@ -278,28 +278,38 @@ class ImageFolderSource:
                     yield DroppedFrame(position, index, stamp, path, problem or "the image cannot be decoded")
                     continue
                 if shape is None:
-                    shape = image.shape
+                    shape, first = image.shape, path
                 elif image.shape != shape:
-                    raise _size_mismatch(path, image.shape, shape)
+                    raise _size_mismatch(path, image.shape, shape, first if read == 1 else None)
+                read += 1
                 yield SourceFrame(position=position, source_index=index, timestamp=stamp, image=image,
                                   remarks=remarks, where=str(path))
 
 
-def _size_mismatch(path: Path, size: tuple[int, ...], first: tuple[int, ...]) -> FrameSourceError:
+def _size_mismatch(path: Path, size: tuple[int, ...], first: tuple[int, ...],
+                   only_earlier: Path | None = None) -> FrameSourceError:
     """A photo of another size than the folder's first: turned (portrait among landscape), or another camera or a
-    resized copy. COLMAP shares one camera among the frames, so neither can be mixed in."""
+    resized copy. COLMAP shares one camera among the frames, so neither can be mixed in. ``only_earlier``: the one
+    frame read before this one, when there is just one: then either of the two may be the odd one."""
     (h, w), (h0, w0) = size[:2], first[:2]
     problem = f"the image is {w}x{h} but earlier frames are {w0}x{h0}"
+
+    def also(what: str) -> str:  # the fix for the folder's first photo, when it alone was read before
+        return "" if only_earlier is None else f"; if the folder's first photo {only_earlier.name} is {what}"
+
     if (w, h) == (h0, w0):
         return FrameSourceError(path, problem + ": it is turned by 90 degrees against them (a photo held the other "
                                 "way, or a viewer that stored the turn in the pixels)",
-                                f"turn it back to {w0}x{h0} in an image editor, or leave it out of the folder")
+                                f"turn it back to {w0}x{h0} in an image editor, or leave it out of the folder"
+                                + also(f"the one held the other way, turn that one to {w}x{h} instead"))
     if w * h0 == h * w0:  # the same shape at another scale
         return FrameSourceError(path, problem + " (a resized copy?)",
                                 f"resize it to {w0}x{h0} if it is a scaled copy of a photo from the same lens, else "
-                                "leave it out of the folder (frames must come from one camera at one size)")
+                                "leave it out of the folder (frames must come from one camera at one size)"
+                                + also(f"the odd one, resize that one to {w}x{h} instead"))
     return FrameSourceError(path, problem + " (another camera, or a crop)",
-                            "leave it out of the folder: frames must come from one camera at one size")
+                            "leave it out of the folder: frames must come from one camera at one size"
+                            + also("the odd one, leave that one out instead"))
 
 
 def fourcc_text(value: float) -> str:

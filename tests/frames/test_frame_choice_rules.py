@@ -119,3 +119,25 @@ def test_a_photo_of_another_size_is_refused_with_the_likely_cause(tmp_path: Path
         extract_frames(FramesConfig(source=folder, out_dir=tmp_path / "frames", progress=False))
     assert fix in err.value.fix and err.value.path.name == "IMG_0002.png"
     assert not (tmp_path / "frames").exists()
+
+
+@pytest.mark.parametrize(("odd", "fix"), [
+    ((48, 64), "if the folder's first photo IMG_0001.png is the one held the other way, turn that one to 64x48"),
+    ((96, 72), "if the folder's first photo IMG_0001.png is the odd one, resize that one to 64x48"),
+    ((64, 64), "if the folder's first photo IMG_0001.png is the odd one, leave that one out"),
+])
+def test_a_first_photo_of_another_size_is_named_as_the_possible_odd_one(tmp_path: Path, odd, fix) -> None:
+    """The folder's first photo is the odd one (w x h = ODD) among three of 64x48: the refusal comes at the second
+    photo, after one frame only, so the fix names the first as what may be wrong, not only the second."""
+    w, h = odd
+    photos = {"IMG_0001.png": cv2.resize(textured_frame(0), (w, h))}
+    photos |= {f"IMG_000{i}.png": textured_frame(i)[:48, :64] for i in (2, 3, 4)}
+    with pytest.raises(FrameSourceError, match=rf"the image is 64x48 but earlier frames are {w}x{h}") as err:
+        extract_frames(FramesConfig(source=_folder(tmp_path, photos), out_dir=tmp_path / "frames", progress=False))
+    assert err.value.path.name == "IMG_0002.png" and fix in err.value.fix
+    # from the third photo on, two earlier frames agree: the one read now is the odd one, and only it is named
+    photos = {f"IMG_000{i}.png": textured_frame(i)[:48, :64] for i in (1, 2)} | {"IMG_0003.png": photos["IMG_0001.png"]}
+    (tmp_path / "b").mkdir()
+    with pytest.raises(FrameSourceError) as err:
+        extract_frames(FramesConfig(source=_folder(tmp_path / "b", photos), out_dir=tmp_path / "f", progress=False))
+    assert err.value.path.name == "IMG_0003.png" and "first photo" not in err.value.fix
