@@ -23,6 +23,9 @@ MIN_DIAGONAL_FOV_DEG = 1.0
 MAX_DIAGONAL_FOV_DEG = 160.0
 """A given focal length wider than this diagonal field of view is refused: no pinhole camera model describes such a
 lens (a 35 mm equivalent of 3.8 mm; phones' widest lenses are about 13 mm, 118 degrees)."""
+REFINED_RATIO = (0.8, 1.25)
+"""With ``--refine-focal``, a refined focal length outside these times the given one is warned of: the bound by which
+the poses stage calls fx and fy of one camera too far apart (quality_gate.intrinsics_warnings)."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,17 @@ class KnownFocal:
         extra = {"SIMPLE_PINHOLE": 0, "SIMPLE_RADIAL": 1, "RADIAL": 2, "PINHOLE": 0, "OPENCV": 4}[model]
         focal = [f, f] if model in ("PINHOLE", "OPENCV") else [f]
         return ",".join(repr(float(v)) for v in [*focal, cx, cy, *[0.0] * extra])
+
+    def refined_warning(self, focal_px: float) -> str | None:
+        """A warning when bundle adjustment, let refine the given focal length (``refine``), ended at ``focal_px``
+        outside ``REFINED_RATIO`` of it: a known value that moved that far is contradicted, not refined."""
+        ratio = focal_px / self.focal_px
+        if not self.refine or REFINED_RATIO[0] <= ratio <= REFINED_RATIO[1]:
+            return None
+        return (f"--refine-focal moved the given focal length ({self.given}: {self.focal_px:.1f} px) to "
+                f"{focal_px:.1f} px ({100 * (ratio - 1):+.0f} %), outside {REFINED_RATIO[0]:g}..{REFINED_RATIO[1]:g} "
+                "times it: bundle adjustment drifted (docs/poses.md, Known focal length) or the value given is wrong; "
+                "fix: check the value and its unit, then leave out --refine-focal to keep it as given")
 
     def as_dict(self) -> dict[str, Any]:
         return {

@@ -145,6 +145,8 @@ def estimate_poses(cfg: PosesConfig) -> dict[str, Any]:
         transforms = transforms_dict(rec, frames.source_index, image_dir=frames.image_dir, out_dir=cfg.out_dir)
         if focal is not None:  # only then: a run without one writes what it always wrote
             transforms["focal_given"] = focal.as_dict()
+            if (refined := focal.refined_warning(transforms["fl_x"])) is not None:
+                warnings_.append(refined)
         warnings_ += intrinsics_warnings(transforms["fl_x"], transforms["fl_y"], transforms["w"], transforms["h"])
         write_model_outputs(out, rec, transforms, "livescene poses", None if frame is None else frame.as_dict())
         if cfg.keep_database:
