@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stages.poses.up_check import WARN_DEG, check_up
+from stages.poses.up_check import WARN_DEG, UpCheck, check_up
 
 
 def _room(rng: np.random.Generator) -> np.ndarray:
@@ -43,3 +43,21 @@ def test_a_tilt_within_the_threshold_and_too_few_points_say_nothing() -> None:
     sparse = check_up(_room(np.random.default_rng(4))[:20])
     assert sparse.plane_tilt_deg is None and sparse.warning() is None
     assert check_up(_room(np.random.default_rng(5))).as_dict() == check_up(_room(np.random.default_rng(5))).as_dict()
+
+
+def test_a_small_floor_among_clutter_is_found_and_a_cloud_without_a_plane_is_not_checked() -> None:
+    rng = np.random.default_rng(6)
+    # a 4 x 3 m floor of 40 points among 400 scattered through the 4 x 3 x 2.5 m room: 1 in 1,331 triples is floor
+    floor = np.column_stack([rng.uniform(-2, 2, 40), rng.uniform(-1.5, 1.5, 40), np.zeros(40)])
+    clutter = np.column_stack([rng.uniform(-2, 2, 400), rng.uniform(-1.5, 1.5, 400), rng.uniform(0.2, 2.5, 400)])
+    check = check_up(_tilted(np.concatenate([floor, clutter]), 5.0))
+    assert check.plane_tilt_deg == pytest.approx(5.0, abs=0.3) and check.plane_points == 40 and check.disagrees
+    # the scattered points alone: no plane holds 30 of them within 0.5 % of the room's size (19 mm)
+    none = check_up(clutter)
+    assert none.plane_tilt_deg is None and 0 < none.plane_points < 30 and none.warning() is None
+
+
+def test_the_threshold_itself_does_not_warn() -> None:
+    assert UpCheck(WARN_DEG, 100, 1000).warning() is None  # "more than 2 degrees" warns
+    assert UpCheck(WARN_DEG + 0.01, 100, 1000).warning() is not None
+    assert check_up(_room(np.random.default_rng(4))[:20]).plane_points == 0  # too few points: not tried
