@@ -13,7 +13,15 @@ import torch
 import yaml
 
 from stages.model import Trainer, load_config, load_run
-from stages.model.camera_opt import align_rays, correct_rays, corrected_c2w, so3_exp
+from stages.model.camera_opt import (
+    CameraCorrections,
+    align_rays,
+    correct_rays,
+    corrected_c2w,
+    correction_size,
+    exponential_factor,
+    so3_exp,
+)
 from stages.model.rays import RayBundle
 from stages.model.scene_normalization import SceneNormalization
 from stages.scene import InputError
@@ -218,3 +226,57 @@ def test_the_train_cli_takes_camera_opt(tiny_dataset, tmp_path, tiny_overrides, 
     assert train_main([*args, *sets, "--camera-opt", mode, "--no-progress"]) == 0
     train = yaml.safe_load((tmp_path / "run" / "config.yaml").read_text())["train"]
     assert train.get("camera_opt", "off") == mode
+
+
+def _rodrigues(w: np.ndarray) -> np.ndarray:
+    """R = cos t I + sin t [k]x + (1 - cos t) k k^T, t = |w|, k = w / t (float64, by hand)."""
+    t = float(np.linalg.norm(w))
+    k = w / t
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return math.cos(t) * np.eye(3) + math.sin(t) * kx + (1 - math.cos(t)) * np.outer(k, k)
+
+
+@pytest.mark.parametrize("theta2", [5e-7, 5e-3])  # either side of the Taylor series' 1e-6
+def test_so3_exp_is_exact_in_float64_near_zero(theta2: float):
+    w = np.array([1.0, -2.0, 0.5]) * math.sqrt(theta2 / 5.25)
+    got = so3_exp(torch.tensor(w[None], dtype=torch.float64))[0].numpy()
+    np.testing.assert_allclose(got, _rodrigues(w), rtol=0, atol=1e-15)
+
+
+def test_penalty_decay_and_sizes_by_hand():
+    corrections = CameraCorrections(torch.tensor([0, 1]), 2)
+    with torch.no_grad():
+        corrections.adjustment.copy_(torch.tensor([[3.0, 4.0, 0, 0, 0, 0], [0, 0, 0, 0, 0.5, 0]]))
+    # mean translation length (5 + 0) / 2, mean angle (0 + 0.5) / 2, each length with 1e-12 under its root
+    assert float(corrections.penalty(1.0, 10.0).detach()) == pytest.approx(2.5 + 10 * 0.25, abs=1e-4)
+    assert exponential_factor(50, 100, 0.1) == pytest.approx(0.1**0.5)
+    assert exponential_factor(50, 100, 0.1, time_fraction=0.8) == pytest.approx(0.1**0.8)  # the budget leads
+    assert exponential_factor(200, 100, 0.1) == pytest.approx(0.1)
+    norm = SceneNormalization(np.diag([0.5, 0.5, 0.5, 1.0]), "t")  # x_unit = 0.5 x_world
+    size = correction_size(np.array([0.3, 0.4, 0.0, 0.0, 0.0, math.pi / 2]), norm)
+    assert size == pytest.approx({"rotation_deg": 90.0, "translation": 1.0})
+
+
+def test_a_turned_camera_takes_the_world_rotation_first():
+    """The correction turns the camera in world axes: R' = exp(w) R, the rays' ``exp(w) d``, not R exp(w)."""
+    c2w = np.eye(4)
+    c2w[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # 90 degrees about x
+    out = corrected_c2w(c2w, np.array([0, 0, 0, 0, 0, math.pi / 2]), SceneNormalization(np.eye(4), "t"))
+    # [[0, -1, 0], [1, 0, 0], [0, 0, 1]] @ R, by hand
+    np.testing.assert_allclose(out[:3, :3], [[0, 0, 1], [1, 0, 0], [0, 1, 0]], atol=1e-12)
+
+
+def test_alignment_keeps_the_best_pose_and_fits_its_pixels():
+    """A first Adam step of lr 1 overshoots a 0.001 offset by far: the zero correction, scored best, is returned;
+    the objective is rays_per_step pixels of the view, the same at every step."""
+    origins = torch.zeros(50, 3)
+    directions = torch.nn.functional.normalize(torch.rand(50, 3, generator=torch.Generator().manual_seed(2)), dim=-1)
+    seen = []
+
+    def render(rays: RayBundle) -> torch.Tensor:
+        seen.append(len(rays.origins))
+        return rays.origins  # the colour is where the ray starts: at zero correction the target's 0.001 off
+
+    found = align_rays(render, origins, directions, origins + 0.001, 0.05, seed=0, steps=3, rays_per_step=20, lr=1.0)
+    np.testing.assert_array_equal(found, np.zeros(6))
+    assert seen == [20] * 4  # the pose before each of 3 steps and the last one's, 20 pixels each
