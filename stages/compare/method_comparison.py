@@ -135,7 +135,9 @@ def score_run(run_dir: Path, data: str | Path, eval_frames: int = 4, eval_scale:
     """Mean PSNR and SSIM of renders of held-out frames (dataset 'test' split) at their states / time.
 
     ``eval_scale`` > 1 renders at 1/eval_scale resolution against the image
-    area-downsampled to the same size (a CPU shortcut; every method gets the same).
+    area-downsampled to the same size (a CPU shortcut; every method gets the same). A run that refined its cameras
+    (``train.camera_opt``) is scored at each view's pose aligned to it, as ``livescene evaluate`` scores it
+    (docs/model.md, "Camera refinement"): its world moved off the dataset's poses.
     """
     import cv2
 
@@ -153,7 +155,10 @@ def score_run(run_dir: Path, data: str | Path, eval_frames: int = 4, eval_scale:
         if eval_scale > 1:
             cam = cam.scaled(1.0 / eval_scale)
             target = cv2.resize(target, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
-        out = run.render(cam, f.c2w, None, frame_index=index[id(f)])
+        c2w = f.c2w
+        if getattr(run, "refined_cameras", False):  # seeded as the evaluation seeds it: the same pixels, the same pose
+            c2w, _ = run.align_pose(cam, c2w, target, None, frame_index=index[id(f)], seed=index[id(f)])
+        out = run.render(cam, c2w, None, frame_index=index[id(f)])
         p.append(psnr(out["rgb"], target))
         s.append(ssim(out["rgb"], target))
     return {"psnr": float(np.mean(p)), "ssim": float(np.mean(s)), "eval_frames": len(frames)}

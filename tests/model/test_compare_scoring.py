@@ -70,3 +70,40 @@ def test_score_run_at_eval_scale_renders_a_smaller_camera_against_the_downsample
     expected = (20.0 + 2 * -20.0 * math.log10(OTHER_OFFSET) + 40.0) / 4
     # the area downsample is the 2x2 block mean up to float32 rounding (~1e-7 of an offset >= 0.01)
     assert out["psnr"] == pytest.approx(expected, abs=1e-3)
+
+
+SHIFT = 0.25  # the fake alignment moves a view's camera this far along x (dataset units)
+
+
+class _RefinedRun(_OffsetRun):
+    """A run that refined its cameras: it renders a view well (offset 0.01, 40 dB) only at the pose its alignment
+    returns, and badly (offset 0.1, 20 dB) at the dataset's pose."""
+
+    refined_cameras = True
+
+    def __init__(self, ds) -> None:
+        super().__init__(ds)
+        self.aligned: list[tuple[int, int, int]] = []
+
+    def align_pose(self, camera, c2w, image, states=None, frame_index=None, seed=0):
+        assert image.shape == (camera.height, camera.width, 3)
+        self.aligned.append((frame_index, seed, camera.width))
+        out = np.array(c2w, dtype=np.float64)
+        out[0, 3] += SHIFT
+        return out, np.zeros(6)
+
+    def render(self, camera, c2w, states, frame_index=None, outputs=None):
+        self.calls.append((frame_index, camera.width, camera.height, states))
+        img = self.ds.load_image(self.ds.frames[frame_index])[..., :3].astype(np.float64)
+        aligned = np.asarray(self.ds.frames[frame_index].c2w)[0, 3] + SHIFT
+        return {"rgb": img + (0.01 if math.isclose(c2w[0][3], aligned) else 0.1)}
+
+
+def test_score_run_scores_a_refined_run_at_its_aligned_poses(tmp_path, monkeypatch):
+    ds = make_tiny_dataset(tmp_path / "scene", n_frames=8, width=W, height=H)
+    run = _RefinedRun(ds)
+    monkeypatch.setattr(model_run, "load_run", lambda run_dir: run)
+    out = score_run(tmp_path / "run", ds.root, eval_frames=2)
+    # each scored view aligned once, at its own frame index and seed (as `livescene evaluate` seeds it)
+    assert run.aligned == [(0, 0, W), (6, 6, W)]
+    assert out["psnr"] == pytest.approx(40.0, abs=1e-6)  # -20 log10(0.01) at the aligned pose, not 20 dB
