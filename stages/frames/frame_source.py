@@ -307,6 +307,11 @@ def _size_mismatch(path: Path, size: tuple[int, ...], first: tuple[int, ...],
                                 f"resize it to {w0}x{h0} if it is a scaled copy of a photo from the same lens, else "
                                 "leave it out of the folder (frames must come from one camera at one size)"
                                 + also(f"the odd one, resize that one to {w}x{h} instead"))
+    if w * w0 == h * h0:  # the other orientation at another scale
+        return FrameSourceError(path, problem + ": it is turned by 90 degrees against them and of another scale",
+                                f"turn it and resize it to {w0}x{h0} if it is a photo from the same lens, else leave "
+                                "it out of the folder"
+                                + also(f"the odd one, turn and resize that one to {w}x{h} instead"))
     return FrameSourceError(path, problem + " (another camera, or a crop)",
                             "leave it out of the folder: frames must come from one camera at one size"
                             + also("the odd one, leave that one out instead"))

@@ -42,7 +42,10 @@ def frames_notes(frames: dict) -> list[str]:
         notes.append(f"The video held {decoded} frames where its header declares {declared}: every one was read.")
     dropped = frames.get("dropped") or []
     if dropped:
-        notes.append(f"{len(dropped)} damaged frame(s) left out (frames_dropped.csv): {_names(dropped, 'frame')}.")
+        # a photo folder's dropped frames by the user's file names; a video's by frame (one file for all)
+        names = [Path(str(d.get("source_file"))).name if frames.get("source_kind") == "images" and d.get("source_file")
+                 else d.get("frame") for d in dropped]
+        notes.append(f"{len(dropped)} damaged frame(s) left out (frames_dropped.csv): {_names(names)}.")
     blank = frames.get("blank_frames") or []
     if blank:
         notes.append(f"{len(blank)} kept frame(s) of almost one grey level (a lens cover, a plain surface filling the "

@@ -107,6 +107,7 @@ def test_a_repeat_is_the_frame_before_to_the_last_pixel(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("odd", "said", "fix"), [
     ((48, 64), "it is turned by 90 degrees against them", "turn it back to 64x48"),
     ((96, 72), r"\(a resized copy\?\)", "resize it to 64x48 if it is a scaled copy"),
+    ((96, 128), "it is turned by 90 degrees against them and of another scale", "turn it and resize it to 64x48"),
     ((64, 64), r"\(another camera, or a crop\)", "leave it out of the folder"),
 ])
 def test_a_photo_of_another_size_is_refused_with_the_likely_cause(tmp_path: Path, odd, said, fix) -> None:

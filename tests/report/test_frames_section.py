@@ -66,6 +66,14 @@ def test_a_truncated_video_says_so_and_a_ready_dataset_says_why_there_is_no_sect
     assert "rule frames skipped for this scene" in html and "<table" not in html
 
 
+def test_a_photo_folder_names_its_dropped_photos_by_their_file_names():
+    dropped = [{"frame": "frame_00012", "source_file": "/data/shots/IMG_0012.JPG", "problem": "truncated JPEG"}]
+    photos = {**CLEAN, "source_kind": "images", "dropped": dropped, "dropped_frame_count": 1}
+    assert frames_notes(photos) == ["1 damaged frame(s) left out (frames_dropped.csv): IMG_0012.JPG."]
+    video = {**photos, "source_kind": "video"}  # one file for every frame: the frame names it
+    assert frames_notes(video) == ["1 damaged frame(s) left out (frames_dropped.csv): frame_00012."]
+
+
 def test_names_are_escaped():
     html = section_frames({**CLEAN, "skipped_files": ["<b>x</b>.heic"]})
     assert "&lt;b&gt;x&lt;/b&gt;.heic" in html and "<b>x</b>" not in html
