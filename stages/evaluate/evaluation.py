@@ -184,15 +184,22 @@ class Evaluator:
         if frame.frame_id not in self._aligned:
             t0 = time.perf_counter()
             image = self._image(frame)
-            gains = getattr(self.run, "exposure_gains", None) or {}
-            if frame.frame_id in gains:  # the run renders the nominal exposure
-                image = np.clip(image * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
+            nominal = self._nominal(frame, image)  # the run renders the nominal exposure
+            image = image if nominal is None else nominal
             learned = getattr(self.run, "state_mode", "given") == "learned"
             self._aligned[frame.frame_id] = self.run.align_pose(
                 self._camera(frame), c2w, image, None if learned else frame.state, frame_index=self._run_index(frame),
                 seed=self.ds.frames.index(frame))
             self.align_seconds += time.perf_counter() - t0
         return self._aligned[frame.frame_id][0]
+
+    def _nominal(self, frame: Frame, image: np.ndarray) -> np.ndarray | None:
+        """``image`` of ``frame`` at the nominal exposure a run trained on measured gains renders (docs/model.md,
+        "Exposure"); None when the run has no gain for the frame."""
+        gains = getattr(self.run, "exposure_gains", None) or {}
+        if frame.frame_id not in gains:
+            return None
+        return np.clip(image * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
 
     def view_alignment(self) -> dict[str, Any]:
         """metrics.json's record of the protocol: the alignment's settings and each aligned view's correction."""
@@ -246,8 +253,6 @@ class Evaluator:
         # (docs/method.md section 6)
         learned = getattr(self.run, "state_mode", "given") == "learned"
         regions = self._mask_source() if self.ds.objects else ""
-        # a run trained on measured exposure gains renders the nominal exposure: score it against each held-out
-        # image at that exposure too (its gains come from the same measurement; docs/model.md, "Exposure")
         gains = getattr(self.run, "exposure_gains", None) or {}
         for frame in tqdm(frames, desc="held-out views", unit="view", disable=not self.config.progress):
             gt = self._image(frame)
@@ -261,8 +266,9 @@ class Evaluator:
                    "state": frame.state}
             if regions:
                 rec.update(self._region_scores(frame, rgb, gt, out.get("accumulation")))
-            if frame.frame_id in gains:
-                nominal = np.clip(gt * np.exp(-np.asarray(gains[frame.frame_id])), 0.0, 1.0)
+            # a run trained on measured exposure gains renders the nominal exposure: score it against each held-out
+            # image at that exposure too (its gains come from the same measurement; docs/model.md, "Exposure")
+            if (nominal := self._nominal(frame, gt)) is not None:
                 rec["psnr_nominal"] = _finite_or_none(psnr(rgb, nominal))
             records.append(rec)
             kept.append((frame, self._for_grounding(out)))

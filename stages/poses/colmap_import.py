@@ -287,8 +287,6 @@ IMPORT_BROKEN_FIX = ("COLMAP's model holds cameras that no continuous path joins
                      "images")
 
 
-
-
 def import_model(cfg: ImportConfig) -> dict[str, Any]:
     """Import ``cfg.model_dir``; write ``cfg.out_dir`` atomically and return the content of poses.json."""
     t_start = time.perf_counter()

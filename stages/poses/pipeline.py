@@ -20,13 +20,7 @@ from .config import PosesConfig
 from .focal_check import check_model_focal
 from .frame_list import check_name_order, read_frame_list, time_order
 from .known_focal import known_focal
-from .model_export import (
-    drop_frames,
-    judge_camera_path,
-    registered_poses,
-    transforms_dict,
-    write_model_outputs,
-)
+from .model_export import drop_frames, judge_camera_path, registered_poses, transforms_dict, write_model_outputs
 from .quality_gate import (
     STATIC_ADVICE,
     blank_frames_note,

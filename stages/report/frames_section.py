@@ -10,14 +10,14 @@ from __future__ import annotations
 from html import escape
 from pathlib import Path
 
-from .html_parts import fmt, missing, table
+from .html_parts import fmt, missing, note_list, table
 
 LISTED = 10
 """Frames or files named in a row before '... and N more'."""
 
 
-def _names(items: list, key: str | None = None) -> str:
-    names = [str(i[key] if key else i) for i in items]
+def _names(items: list) -> str:
+    names = [str(i) for i in items]
     more = f" ... and {len(names) - LISTED} more" if len(names) > LISTED else ""
     return escape(", ".join(names[:LISTED]) + more)
 
@@ -87,6 +87,5 @@ def section_frames(frames: dict | None, skipped: str = "the frames rule did not 
     html = table(["frames", "value"], rows)
     notes = frames_notes(frames)
     if notes:
-        html += (f"<p class=\"note\">{len(notes)} warning(s) from the frames stage (frames.json):</p><ul>"
-                 + "".join(f"<li>{n}</li>" for n in notes) + "</ul>")
+        html += note_list(f"{len(notes)} warning(s) from the frames stage (frames.json):", notes)
     return html

@@ -57,6 +57,11 @@ def table(headers: list[str], rows: list[list[Any]], *, cls: str = "") -> str:
     return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>'
 
 
+def note_list(head: str, items: list[str]) -> str:
+    """A note (``head``, HTML) over a bulleted list of ``items`` (HTML each): a stage's warnings on a page."""
+    return f'<p class="note">{head}</p><ul>' + "".join(f"<li>{item}</li>" for item in items) + "</ul>"
+
+
 def missing(text: str) -> str:
     """The notice a section shows when its input is absent (says why)."""
     return f'<p class="missing">{escape(text)}</p>'

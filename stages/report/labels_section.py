@@ -10,7 +10,7 @@ from html import escape
 
 from stages.labels.mask_checks import warning_line
 
-from .html_parts import fmt, missing, table
+from .html_parts import fmt, missing, note_list, table
 from .scene_data import SceneData, csv_number, read_csv_rows, read_json
 from .svg_plot import Series, line_plot_svg
 
@@ -57,10 +57,10 @@ def section_labels(sd: SceneData, skipped: str = "the labels rule did not run fo
             f"H*W/300 pixels and a quarter of its median size (their mask loss is skipped).</p>")
     warnings = labels.get("mask_warnings") or []
     if warnings:  # docs/labels-states.md, "Tracker failures"
-        items = "".join(f"<li>{escape(warning_line(w))}</li>" for w in warnings[:20])
-        more = f"<li>... and {len(warnings) - 20} more (labels.json, mask_warnings)</li>" if len(warnings) > 20 else ""
-        head += (f"<p class=\"note\">{len(warnings)} warning(s) about the masks, the marks of a tracker's failure "
-                 f"(check these frames; the stage used the masks as given):</p><ul>{items}{more}</ul>")
+        items = [escape(warning_line(w)) for w in warnings[:20]]
+        more = [f"... and {len(warnings) - 20} more (labels.json, mask_warnings)"] if len(warnings) > 20 else []
+        head += note_list(f"{len(warnings)} warning(s) about the masks, the marks of a tracker's failure (check these "
+                          "frames; the stage used the masks as given):", items + more)
     report = read_json(folder / "propagation.json")
     if report is None:
         without = labels.get("frames_without_masks") or []

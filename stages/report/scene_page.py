@@ -16,7 +16,7 @@ from stages.scene.machine import machine_line
 
 from .export_section import section_export
 from .frames_section import section_frames
-from .html_parts import fmt, missing, page, table
+from .html_parts import fmt, missing, note_list, page, table
 from .images import error_map, file_data_uri, png_data_uri, read_rgb
 from .labels_section import section_labels
 from .paired import LIVESCENE, PairedResult, compare
@@ -142,8 +142,8 @@ def section_poses(sd: SceneData) -> str:
     html = table(["COLMAP", "value"], rows)
     warnings = p.get("warnings") or []
     if warnings:  # the stage printed them on stderr, where a workflow's log keeps them out of sight
-        html += (f"<p class=\"note\">{len(warnings)} warning(s) from the poses stage (poses.json, warnings):</p><ul>"
-                 + "".join(f"<li>{escape(str(w))}</li>" for w in warnings) + "</ul>")
+        html += note_list(f"{len(warnings)} warning(s) from the poses stage (poses.json, warnings):",
+                          [escape(str(w)) for w in warnings])
     if sd.pose_error is None:
         html += missing(_why_skipped(sd, "pose_compare"))
     else:
