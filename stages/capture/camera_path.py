@@ -103,36 +103,62 @@ def check_camera_in_free_space(centres: np.ndarray, spec: CaptureSpec, spec_path
                 "route the camera path around it (camera.radius and camera.height, or camera.waypoints)")
 
 
-def _camera_centres(spec: CaptureSpec) -> np.ndarray:
-    """``[n_frames, 3]`` camera centres in metres before hand shake (the path's smoothed positions)."""
+def _camera_centres(spec: CaptureSpec, positions: np.ndarray) -> np.ndarray:
+    """``[len(positions), 3]`` camera centres in metres before hand shake (the path's smoothed positions) at frame
+    positions (frame index, fractional between frames)."""
     path = spec.camera
     n = spec.video.n_frames
-    times_s = np.arange(n) / spec.video.fps
-    centres = _orbit_centres(path, times_s) if path.kind == "orbit" else _walk_centres(path, times_s)
-    if path.kind == "walk" and n > 2:
-        # corners of the polyline would jerk the camera; a short moving average rounds them
-        k = max(1, min(5, n // 8))
-        padded = np.concatenate([np.repeat(centres[:1], k, 0), centres, np.repeat(centres[-1:], k, 0)])
-        kernel = np.ones(2 * k + 1) / (2 * k + 1)
-        centres = np.stack([np.convolve(padded[:, a], kernel, mode="valid") for a in range(3)], axis=1)
-    return centres
+    if path.kind == "orbit":
+        return _orbit_centres(path, positions / spec.video.fps)
+    if n <= 2:
+        return _walk_centres(path, positions / spec.video.fps)
+    frames = _walk_centres(path, np.arange(n) / spec.video.fps)
+    # corners of the polyline would jerk the camera; a short moving average over frames rounds them
+    k = max(1, min(5, n // 8))
+    padded = np.concatenate([np.repeat(frames[:1], k, 0), frames, np.repeat(frames[-1:], k, 0)])
+    kernel = np.ones(2 * k + 1) / (2 * k + 1)
+    frames = np.stack([np.convolve(padded[:, a], kernel, mode="valid") for a in range(3)], axis=1)
+    # between frames the camera goes straight (the polyline's corners are already rounded over 2k frames);
+    # np.interp returns a frame's own value at its position (bit for bit) and holds the ends: the walk stands
+    # still before its first and after its last frame
+    return np.stack([np.interp(positions, np.arange(n), frames[:, a]) for a in range(3)], axis=1)
 
 
-def camera_path(spec: CaptureSpec, spec_path: str | Path = "<spec>") -> np.ndarray:
-    """``[n_frames, 4, 4]`` camera-to-world poses (OpenGL axes) in metres."""
-    path = spec.camera
-    n = spec.video.n_frames
-    times_s = np.arange(n) / spec.video.fps
+def _shaken_path(spec: CaptureSpec, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centres (metres) and hand-shake rotation vectors at frame positions, both ``[len(positions), 3]``."""
+    positions = np.asarray(positions, dtype=np.float64)
+    times_s = positions / spec.video.fps
     rng = seeded_rng(spec.seed, "camera-shake")
-    j = path.jitter
-    centres = _camera_centres(spec) + shake(times_s, j.position, j.frequency_hz, rng)
-    angles = shake(times_s, np.deg2rad(j.rotation_deg), j.frequency_hz, rng)
-    target = np.asarray(path.target, dtype=np.float64)
-    check_view_directions(centres, target, spec_path)
-    check_camera_in_free_space(centres, spec, spec_path)
-    poses = np.empty((n, 4, 4))
-    for i in range(n):
+    j = spec.camera.jitter
+    centres = _camera_centres(spec, positions) + shake(times_s, j.position, j.frequency_hz, rng)
+    return centres, shake(times_s, np.deg2rad(j.rotation_deg), j.frequency_hz, rng)
+
+
+def _poses(centres: np.ndarray, angles: np.ndarray, target: np.ndarray) -> np.ndarray:
+    poses = np.empty((len(centres), 4, 4))
+    for i in range(len(centres)):
         pose = look_at(centres[i], target)
         pose[:3, :3] = pose[:3, :3] @ Rotation.from_rotvec(angles[i]).as_matrix()
         poses[i] = pose
     return poses
+
+
+def camera_poses_at(spec: CaptureSpec, positions: np.ndarray) -> np.ndarray:
+    """``[len(positions), 4, 4]`` camera-to-world poses (OpenGL axes, metres) at frame positions: ``i`` is video
+    frame i's time, ``i + 0.25`` a quarter of a frame interval later (a sub-frame exposure or a sensor row).
+
+    At integer positions these are ``camera_path``'s poses bit for bit: the hand shake is a sum of sinusoids of
+    time, drawn from the same seeded stream whatever the positions. Unchecked: ``camera_path`` has checked the
+    frames' poses, and a camera between two checked frames stays within a frame's motion of them."""
+    centres, angles = _shaken_path(spec, positions)
+    return _poses(centres, angles, np.asarray(spec.camera.target, dtype=np.float64))
+
+
+def camera_path(spec: CaptureSpec, spec_path: str | Path = "<spec>") -> np.ndarray:
+    """``[n_frames, 4, 4]`` camera-to-world poses (OpenGL axes) in metres; refuses a path whose camera sits on its
+    target, looks straight down or up at it, or leaves the free space of the room."""
+    centres, angles = _shaken_path(spec, np.arange(spec.video.n_frames))
+    target = np.asarray(spec.camera.target, dtype=np.float64)
+    check_view_directions(centres, target, spec_path)
+    check_camera_in_free_space(centres, spec, spec_path)
+    return _poses(centres, angles, target)

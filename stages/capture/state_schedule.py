@@ -35,15 +35,33 @@ def evaluate_schedule(schedule: ScheduleSpec, times: np.ndarray) -> np.ndarray:
     return np.where(times >= kt[-1], kv[-1], out)
 
 
+def time_fractions(spec: CaptureSpec, positions: np.ndarray) -> np.ndarray:
+    """Time fraction at frame positions (frame index, fractional between frames): 0 at the first frame, 1 at the
+    last; outside them for a sub-frame time before the first or after the last frame (schedules hold there).
+
+    The arithmetic of ``np.linspace(0, 1, n)`` (index x step, the last exactly 1), so whole frames keep the bits
+    their states had when this was ``linspace``."""
+    positions = np.asarray(positions, dtype=np.float64)
+    n = spec.video.n_frames
+    if n <= 1:
+        return np.zeros_like(positions)
+    out = positions * (1.0 / (n - 1))
+    return np.where(positions == n - 1, 1.0, out)
+
+
 def frame_times(spec: CaptureSpec) -> np.ndarray:
     """Time fraction of each frame: 0 at the first, 1 at the last."""
-    n = spec.video.n_frames
-    return np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+    return time_fractions(spec, np.arange(spec.video.n_frames))
+
+
+def states_at(spec: CaptureSpec, positions: np.ndarray) -> np.ndarray:
+    """``[len(positions), n_objects]`` states in [0, 1] at frame positions, columns in spec (mapping id) order."""
+    t = time_fractions(spec, positions)
+    if not spec.objects:
+        return np.zeros((len(t), 0))
+    return np.stack([evaluate_schedule(o.schedule, t) for o in spec.objects], axis=1)
 
 
 def state_table(spec: CaptureSpec) -> np.ndarray:
     """``[n_frames, n_objects]`` dense states in [0, 1], columns in spec (mapping id) order."""
-    t = frame_times(spec)
-    if not spec.objects:
-        return np.zeros((len(t), 0))
-    return np.stack([evaluate_schedule(o.schedule, t) for o in spec.objects], axis=1)
+    return states_at(spec, np.arange(spec.video.n_frames))

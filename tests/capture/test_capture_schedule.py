@@ -9,7 +9,7 @@ import pytest
 
 from stages.capture import load_spec, spec_from_dict
 from stages.capture.spec import ScheduleSpec
-from stages.capture.state_schedule import evaluate_schedule, frame_times, state_table
+from stages.capture.state_schedule import evaluate_schedule, frame_times, state_table, states_at
 
 PRESETS = Path(__file__).resolve().parents[2] / "config" / "captures"
 
@@ -17,6 +17,23 @@ PRESETS = Path(__file__).resolve().parents[2] / "config" / "captures"
 def test_frame_times_run_from_the_first_to_the_last_frame():
     np.testing.assert_allclose(frame_times(load_spec_frames(5)), [0.0, 0.25, 0.5, 0.75, 1.0])
     np.testing.assert_allclose(frame_times(load_spec_frames(1)), [0.0])
+
+
+def test_frame_times_keep_linspaces_bits():
+    """States at whole frames are those of the frame times np.linspace(0, 1, n) gave before states_at existed."""
+    spec = load_spec_frames(2)
+    for n in range(2, 300):
+        spec.video.n_frames = n
+        assert np.array_equal(frame_times(spec), np.linspace(0.0, 1.0, n)), n
+
+
+def test_states_between_frames_follow_the_schedule_and_hold_outside_the_capture():
+    spec = load_spec(PRESETS / "tiny.yaml")  # 30 frames; the drawer opens (smooth) from t = 0.4 to 0.7
+    table = state_table(spec)
+    assert np.array_equal(states_at(spec, np.arange(30)), table)
+    between = states_at(spec, np.array([14.5]))[0]  # t = 0.5: a third of the way, smoothstep(1/3) = 7/27
+    assert between[1] == pytest.approx(7 / 27)
+    assert np.array_equal(states_at(spec, np.array([-0.4, 29.4])), table[[0, -1]])
 
 
 def load_spec_frames(n: int):
