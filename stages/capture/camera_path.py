@@ -135,6 +135,7 @@ def _shaken_path(spec: CaptureSpec, positions: np.ndarray) -> tuple[np.ndarray, 
 
 
 def _poses(centres: np.ndarray, angles: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """One ``look_at`` per camera, as the frames' poses have always been made (their bits depend on it)."""
     poses = np.empty((len(centres), 4, 4))
     for i in range(len(centres)):
         pose = look_at(centres[i], target)
@@ -143,15 +144,31 @@ def _poses(centres: np.ndarray, angles: np.ndarray, target: np.ndarray) -> np.nd
     return poses
 
 
+def _poses_batched(centres: np.ndarray, angles: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``_poses`` in array operations: 700 times faster for the thousands of sub-frame and row times of a blurred,
+    rolled capture (a ``look_at`` each took 0.3 ms, 0.7 s a frame). The same arithmetic, row by row; the same
+    bits as ``_poses`` for every preset's frames when this was written, but only ``camera_path`` promises those."""
+    back = centres - target
+    back = back / np.linalg.norm(back, axis=1, keepdims=True)
+    right = np.cross(np.array([0.0, 0.0, 1.0]), back)
+    right = right / np.linalg.norm(right, axis=1, keepdims=True)
+    poses = np.zeros((len(centres), 4, 4))
+    poses[:, :3, 0], poses[:, :3, 1], poses[:, :3, 2], poses[:, :3, 3] = right, np.cross(back, right), back, centres
+    poses[:, 3, 3] = 1.0
+    poses[:, :3, :3] = poses[:, :3, :3] @ Rotation.from_rotvec(angles).as_matrix()
+    return poses
+
+
 def camera_poses_at(spec: CaptureSpec, positions: np.ndarray) -> np.ndarray:
     """``[len(positions), 4, 4]`` camera-to-world poses (OpenGL axes, metres) at frame positions: ``i`` is video
     frame i's time, ``i + 0.25`` a quarter of a frame interval later (a sub-frame exposure or a sensor row).
 
-    At integer positions these are ``camera_path``'s poses bit for bit: the hand shake is a sum of sinusoids of
-    time, drawn from the same seeded stream whatever the positions. Unchecked: ``camera_path`` has checked the
-    frames' poses, and a camera between two checked frames stays within a frame's motion of them."""
+    At integer positions these are ``camera_path``'s poses (to the last bit or two: see ``_poses_batched``): the
+    hand shake is a sum of sinusoids of time, drawn from the same seeded stream whatever the positions. Unchecked:
+    ``camera_path`` has checked the frames' poses, and a camera between two frames stays within a frame's motion
+    of them."""
     centres, angles = _shaken_path(spec, positions)
-    return _poses(centres, angles, np.asarray(spec.camera.target, dtype=np.float64))
+    return _poses_batched(centres, angles, np.asarray(spec.camera.target, dtype=np.float64))
 
 
 def camera_path(spec: CaptureSpec, spec_path: str | Path = "<spec>") -> np.ndarray:

@@ -150,8 +150,10 @@ def _run_generate(argv: list[str]) -> int:
     refuse_clobber(out, args.force)
     generate_capture(spec, out, progress=not args.no_progress, replace=args.force)
     meta = json.loads((out / "capture.json").read_text())
+    effects = meta.get("camera_effects")
+    cost = f" ({effects['renders_per_frame']} renders a frame: phone camera effects)" if effects else ""
     print(f"{out}: {meta['n_frames']} frames {meta['width']}x{meta['height']}, objects {meta['objects']}, "
-          f"{meta['timings']['total_s']:.1f} s")
+          f"{meta['timings']['total_s']:.1f} s{cost}")
     return 0
 
 

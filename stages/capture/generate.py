@@ -11,7 +11,7 @@ Layout (see docs/captures.md and the file contracts)::
     truth/transforms.json       nerfstudio form, every video frame, dense "state"
     truth/states.csv            frame, source_index, object, value
     truth/depth/frame_*.npy     float32 z-depth (along the viewing axis) in output units
-    truth/images/frame_*.png    lossless frames (the video's source), when write_truth_images
+    truth/images/frame_*.png    lossless frames (the video's source, with its gains and noise), when write_truth_images
     truth/scene.json            scene box, units, joints, lights
     truth/spec.yaml             the full spec: TruthRenderer rebuilds the scene from it
     truth/texture_atlas.npz     the surface textures with the inputs they came from (a cache for truth renders)
@@ -33,9 +33,10 @@ from tqdm import tqdm
 from stages.scene import atomic_dir
 from stages.scene.transforms import camera_to_dict
 
+from .camera_effects import FrameRenderer, SensorNoise
 from .camera_path import camera_path, seeded_rng
 from .renderer import ATLAS_FILE, SceneRenderer
-from .spec import CaptureSpec, spec_to_dict
+from .spec import CaptureSpec, camera_effects, spec_to_dict
 from .state_schedule import state_table
 
 GENERATOR_VERSION = "1"
@@ -123,6 +124,8 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
     v = spec.video
     render_s = write_s = 0.0
     gains = frame_gains(spec)
+    frames = FrameRenderer(spec, renderer)
+    noise = SensorNoise(spec)
     with atomic_dir(out_dir, "capture", legacy=["capture.json"], force=replace) as tmp:
         for sub in ("masks", "truth/depth", "truth/images"):
             (tmp / sub).mkdir(parents=True, exist_ok=True)
@@ -135,9 +138,11 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
         try:
             for i in tqdm(range(v.n_frames), desc=f"capture {spec.name}", unit="frame", disable=not progress):
                 t0 = time.perf_counter()
-                out = renderer.render(poses[i], states[i])
+                out = frames.render(i, poses[i], states[i])
                 t1 = time.perf_counter()
                 rgb = out["rgb"] if gains is None else out["rgb"] * gains[i]  # untouched without jitter
+                if noise.on:  # likewise
+                    rgb = noise(rgb)
                 bgr = to_uint8(rgb)[..., ::-1]
                 writer.write(np.ascontiguousarray(bgr))
                 name = frame_name(i)
@@ -185,6 +190,8 @@ def generate_capture(spec: CaptureSpec, out_dir: str | Path, progress: bool = Tr
             "generator_version": GENERATOR_VERSION,
             "truth_images": "truth/images (lossless PNG)" if spec.write_truth_images else None,
             "frame_gains": None if gains is None else gains.round(5).tolist(),
+            **({"camera_effects": {**effects, "renders_per_frame": frames.renders_per_frame}}
+               if (effects := camera_effects(v)) is not None else {}),  # absent without: capture.json as before
             "timings": {"setup_s": round(t_setup, 3), "render_s": round(render_s, 3), "write_s": round(write_s, 3),
                         "total_s": round(time.perf_counter() - t_start, 3)},
         }

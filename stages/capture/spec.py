@@ -47,6 +47,20 @@ class Units:
 
 
 @dataclass
+class LensDistortion:
+    """OpenCV radial-tangential coefficients of the lens, in normalised image coordinates (all 0 = a pinhole)."""
+
+    k1: float = 0.0
+    """First radial coefficient (negative = barrel, as most phone lenses before correction)."""
+    k2: float = 0.0
+    """Second radial coefficient."""
+    p1: float = 0.0
+    """First tangential coefficient (a lens tilted against the sensor)."""
+    p2: float = 0.0
+    """Second tangential coefficient."""
+
+
+@dataclass
 class VideoSpec:
     """Resolution, timing and lens of the rendered video."""
 
@@ -65,6 +79,20 @@ class VideoSpec:
     The video and truth/images carry it; the truth renderer renders at the nominal exposure."""
     white_balance_jitter: float = 0.0
     """Standard deviation of each frame's per-channel log gain (auto white balance; 0 = none)."""
+    shutter: float = 0.0
+    """Exposure time as a fraction of the frame interval (0 = instantaneous, no motion blur; 0.5 = 1/20 s at
+    10 fps): each frame averages ``blur_samples`` renders over the exposure, centred on the frame's time."""
+    blur_samples: int = 8
+    """Sub-frame renders averaged per frame when ``shutter`` > 0 (each costs a full render)."""
+    rolling_shutter: float = 0.0
+    """Readout time of the whole sensor as a fraction of the frame interval (0 = global shutter): row r is exposed
+    at the frame's time + (r / (height - 1) - 0.5) x rolling_shutter / fps, the top row first."""
+    noise_read: float = 0.0
+    """Sensor noise independent of the signal: its standard deviation in linear intensity (1 = white)."""
+    noise_shot: float = 0.0
+    """Signal-dependent (photon) noise: variance shot x intensity, added to noise_read's variance."""
+    distortion: LensDistortion = field(default_factory=LensDistortion)
+    """The lens's radial and tangential distortion (OpenCV model); written into truth/transforms.json."""
 
 
 @dataclass
@@ -261,9 +289,30 @@ def load_spec(path: str | Path) -> CaptureSpec:
     return spec_from_dict(data, path)
 
 
+CAMERA_EFFECT_KEYS = ("shutter", "blur_samples", "rolling_shutter", "noise_read", "noise_shot", "distortion")
+"""The phone camera's effects among ``video``'s keys (docs/captures.md, "Phone camera effects")."""
+
+
+def camera_effects(video: VideoSpec) -> dict[str, Any] | None:
+    """The phone camera's effects of a spec as plain data, or None when every one is off (their defaults)."""
+    if not (video.shutter > 0 or video.rolling_shutter > 0 or video.noise_read > 0 or video.noise_shot > 0
+            or any(dataclasses.astuple(video.distortion))):
+        return None
+    out = {k: getattr(video, k) for k in CAMERA_EFFECT_KEYS}
+    out["distortion"] = dataclasses.asdict(video.distortion)
+    return out
+
+
 def spec_to_dict(spec: CaptureSpec) -> dict[str, Any]:
-    """Plain data (YAML-serialisable) of a spec; ``spec_from_dict`` inverts it."""
-    return dataclasses.asdict(spec)
+    """Plain data (YAML-serialisable) of a spec; ``spec_from_dict`` inverts it.
+
+    Without any phone camera effect their keys are left out (they read back as their defaults), so a capture of
+    a spec that has none writes the truth/spec.yaml it wrote before the effects existed."""
+    data = dataclasses.asdict(spec)
+    if camera_effects(spec.video) is None:
+        for k in CAMERA_EFFECT_KEYS:
+            del data["video"][k]
+    return data
 
 
 def _vec(value: Any, n: int, path: Path, where: str, positive: bool = False) -> None:
@@ -354,6 +403,36 @@ def _joint_range(o: ObjectSpec, path: Path, where: str) -> None:
                                fix)
 
 
+MAX_BLUR_SAMPLES = 64
+"""More sub-frame renders than this per frame would take hours for a preset and smooth nothing more."""
+MAX_NOISE_READ = 0.2
+MAX_NOISE_SHOT = 0.1
+"""A standard deviation of ~0.37 at white (sqrt(0.2^2 + 0.1)): far beyond a phone in a dim room; above these the
+frames would be mostly clipped noise."""
+
+
+def _check_camera_effects(spec: CaptureSpec, path: Path) -> None:
+    v = spec.video
+    for key, hi, meaning in (("shutter", 1.0, "the exposure time as a fraction of the frame interval"),
+                             ("rolling_shutter", 1.0, "the sensor's readout time as a fraction of the frame interval"),
+                             ("noise_read", MAX_NOISE_READ, "a standard deviation in linear intensity, e.g. 0.01"),
+                             ("noise_shot", MAX_NOISE_SHOT, "a variance per unit intensity, e.g. 0.005")):
+        value = getattr(v, key)
+        if not (math.isfinite(value) and 0.0 <= value <= hi):
+            raise CaptureSpecError(path, f"video.{key} is {value}, outside [0, {hi:g}]", f"give {meaning}")
+    if not 1 <= v.blur_samples <= MAX_BLUR_SAMPLES:
+        raise CaptureSpecError(path, f"video.blur_samples is {v.blur_samples}, outside [1, {MAX_BLUR_SAMPLES}]",
+                               "give the number of sub-frame renders averaged per frame, e.g. 8 (each costs a render)")
+    from .lens import lens_camera, lens_problem  # imports this module
+
+    problem = lens_problem(lens_camera(v))
+    if problem is not None:
+        d = dataclasses.asdict(v.distortion)
+        raise CaptureSpecError(path, f"video.distortion {d}: {problem}",
+                               "give the coefficients of a phone lens: |k1| and |k2| of a few hundredths to tenths "
+                               "(docs/captures.md, \"Phone camera effects\")")
+
+
 def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     """Reject specs that cannot be rendered, naming the key and the fix."""
     path = Path(path)
@@ -364,6 +443,7 @@ def validate_spec(spec: CaptureSpec, path: str | Path = "<spec>") -> None:
     if not (0.0 <= v.exposure_jitter <= 1.0 and 0.0 <= v.white_balance_jitter <= 1.0):
         raise CaptureSpecError(path, f"video.exposure_jitter {v.exposure_jitter} / white_balance_jitter "
                                f"{v.white_balance_jitter} out of range", "give log-gain deviations in [0, 1], e.g. 0.1")
+    _check_camera_effects(spec, path)
     _vec(spec.room, 3, path, "room", positive=True)
     if spec.units.per_metre <= 0:
         raise CaptureSpecError(path, "units.per_metre must be > 0", "write 1 for metres, 1000 for millimetres")

@@ -78,6 +78,22 @@ REFUSED = [
     (lambda d: d["render"].update(ambient=-0.1), "render.ambient -0.1 is outside [0, 1]"),
     (lambda d: d["render"].update(ambient=1.5), "render.ambient 1.5 is outside [0, 1]"),
     (lambda d: d["render"]["lights"][0].update(intensity=-0.5), "render.lights[0].intensity -0.5 is negative"),
+    (lambda d: d["video"].update(shutter=1.5), "video.shutter is 1.5, outside [0, 1]"),
+    (lambda d: d["video"].update(shutter=-0.1), "video.shutter is -0.1, outside [0, 1]"),
+    (lambda d: d["video"].update(rolling_shutter=1.2), "video.rolling_shutter is 1.2, outside [0, 1]"),
+    (lambda d: d["video"].update(blur_samples=0), "video.blur_samples is 0, outside [1, 64]"),
+    (lambda d: d["video"].update(blur_samples=65), "video.blur_samples is 65, outside [1, 64]"),
+    (lambda d: d["video"].update(noise_read=-0.01), "video.noise_read is -0.01, outside [0, 0.2]"),
+    (lambda d: d["video"].update(noise_read=float("nan")), "video.noise_read is nan"),
+    (lambda d: d["video"].update(noise_shot=0.5), "video.noise_shot is 0.5, outside [0, 0.1]"),
+    (lambda d: d["video"].update(distortion={"k3": 0.1}), "spec.video.distortion has unknown keys ['k3']"),
+    # tiny.yaml's 70-degree view reaches a normalised radius of 0.87 in its corners: a barrel lens of k1 = -0.5
+    # bends no ray that far (r (1 - 0.5 r^2) peaks at 0.54), and one of k2 = -0.6 neither (r (1 - 0.6 r^4): 0.61)
+    (lambda d: d["video"].update(distortion={"k1": -0.5}), "video.distortion {'k1': -0.5, 'k2': 0.0, 'p1': 0.0, "
+                                                           "'p2': 0.0}: pixel ("),
+    (lambda d: d["video"].update(distortion={"k2": -0.6}), "finds no ray"),
+    # nor one of k1 = -0.2, just (0.86)
+    (lambda d: d["video"].update(distortion={"k1": -0.2}), "is too strong for this 96x72 image"),
 ]
 
 
@@ -120,6 +136,10 @@ ACCEPTED = [
     lambda d: d["render"].update(ambient=0.0),
     lambda d: d["render"].update(ambient=1.0),
     lambda d: d["render"]["lights"][0].update(intensity=0.0),
+    lambda d: d["video"].update(shutter=1.0, blur_samples=64, rolling_shutter=1.0, noise_read=0.2, noise_shot=0.1),
+    lambda d: d["video"].update(shutter=0.0, blur_samples=1),
+    lambda d: d["video"].update(distortion={"k1": -0.2, "k2": 0.05, "p1": 0.002, "p2": -0.002}),  # a phone's
+    lambda d: d["video"].update(distortion={"k1": 0.2}),  # pincushion
 ]
 
 
