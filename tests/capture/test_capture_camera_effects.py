@@ -20,6 +20,7 @@ import pytest
 
 from stages.capture import generate_capture
 from stages.capture.camera_effects import exposure_offsets, row_offsets
+from stages.capture.camera_path import camera_path
 from stages.capture.spec import CameraPathSpec, CaptureSpec, JitterSpec, ScheduleSpec
 
 STEP_M = 0.3  # the walk's 3 m/s at 10 fps: camera travel per frame
@@ -263,6 +264,7 @@ def test_a_distorted_lens_puts_a_point_where_opencv_projects_it(tmp_path, small_
 
 def test_a_distorted_truth_camera_reaches_every_reader(tmp_path, small_spec):
     from stages.capture import TruthRenderer, capture_to_dataset
+    from stages.capture.cli import main
     from stages.evaluate.truth_source import TruthSource
 
     spec = small_spec(n_frames=4, width=64, height=48)
@@ -277,6 +279,35 @@ def test_a_distorted_truth_camera_reaches_every_reader(tmp_path, small_spec):
     out = renderer.render(np.array(fr["transform_matrix"]), fr["state"])
     assert np.array_equal(np.round(np.clip(out["rgb"], 0, 1) * 255).astype(np.uint8), (_frame(cap, 2) * 255).round())
     assert np.array_equal(out["ids"], _mask(cap, 2))
+    png = tmp_path / "view.png"  # `livescene capture render` at a truth pose: the frame, through the lens
+    assert main(["render", "--capture", str(cap), "--pose", "2", "--out", str(png)]) == 0
+    assert np.array_equal(cv2.imread(str(png)), cv2.imread(str(cap / "truth" / "images" / "frame_00002.png")))
     source = TruthSource.from_capture(cap)
     half = source.camera_for(32, 24)  # the coefficients are in normalised coordinates: kept at any image size
     assert half.distortion == lens and half.fx == pytest.approx(renderer.camera.fx / 2)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_rows_of_one_pose_and_state_render_as_a_global_shutter(small_spec, supersample):
+    """``render_rows`` with every row at the frame's pose and states is ``render`` (but for float rounding), through a
+    distorted lens and with supersampling; rows of other states take their own scene."""
+    from stages.capture.renderer import SceneRenderer
+
+    spec = small_spec(n_frames=2, width=40, height=30)
+    spec.video.distortion.k1 = -0.1
+    spec.render.supersample = supersample
+    renderer = SceneRenderer(spec)
+    pose = camera_path(spec)[1]
+    states = np.array([0.6, 0.8])
+    whole = renderer.render(pose, states)
+    rows = renderer.render_rows(np.repeat(pose[None], 30, axis=0), np.repeat(states[None], 30, axis=0))
+    assert np.allclose(rows["rgb"], whole["rgb"], atol=1e-5) and np.allclose(rows["depth"], whole["depth"], atol=1e-5)
+    assert (rows["ids"] == whole["ids"]).mean() > 0.995 and (rows["shadow_ids"] == whole["shadow_ids"]).mean() > 0.995
+    # the bottom half with both objects closed: as a closed render there, as the open one above
+    half = np.repeat(states[None], 30, axis=0)
+    half[15:] = 0.0
+    mixed = renderer.render_rows(np.repeat(pose[None], 30, axis=0), half)
+    closed = renderer.render(pose, np.zeros(2))
+    assert np.allclose(mixed["rgb"][15:], closed["rgb"][15:], atol=1e-5)
+    assert np.allclose(mixed["rgb"][:15], whole["rgb"][:15], atol=1e-5)
+    assert not np.allclose(closed["rgb"], whole["rgb"], atol=1e-3)  # the states show
