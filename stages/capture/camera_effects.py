@@ -18,8 +18,8 @@ from .state_schedule import states_at
 ROLLING_STATE_BANDS = 16
 """Under a rolling shutter each row has the camera pose of its time, but the object states change per band of
 rows (this many per frame, each at its middle row's time): a ray-casting scene is built per state, and 240 a frame
-would cost more than the frame's rays. A door that turns 100 degrees in two seconds moves 0.03 degrees per band at
-10 fps and a readout of 0.6."""
+would cost more than the frame's rays (a scene takes ~1 ms, 16 of them ~0.1 of a 320x240 render). A door that
+turns 100 degrees in two seconds turns 3 degrees during a readout of 0.6 at 10 fps: 0.19 degrees a band."""
 
 
 def exposure_offsets(video: VideoSpec) -> np.ndarray:
