@@ -16,12 +16,13 @@ them); fisheye and panoramic models are refused (docs/data-contract.md).
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .camera import DISTORTION_KEYS, Camera
+from .camera import DISTORTION_KEYS, Camera, distortion_fold
 from .errors import SceneError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG")
@@ -129,7 +130,28 @@ def camera_from_dict(d: dict[str, Any], path: Path, where: str, image_hw: tuple[
     if fx <= 0 or fy <= 0 or w <= 0 or h <= 0:
         raise SceneError(path, f"{where}: focal length and image size must be positive",
                          "re-export the camera intrinsics")
-    return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=w, height=h, distortion=_distortion(d, path, where))
+    camera = Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=w, height=h, distortion=_distortion(d, path, where))
+    if (fold := _fold(camera)) is not None:  # rays there would be wrong, silently (docs/data-contract.md)
+        coefficients = ", ".join(f"{k} {v:g}" for k, v in camera.distortion.items())
+        raise SceneError(path, f"{where}: the lens distortion ({coefficients}) cannot be inverted at every pixel of "
+                         f"the {w}x{h} image: {fold}", "re-estimate the intrinsics (`livescene poses`: RADIAL fits "
+                         "k2 to balance k1), or undistort the images to a pinhole camera (`colmap image_undistorter`) "
+                         "and write camera_model PINHOLE")
+    return camera
+
+
+@lru_cache(maxsize=256)
+def _fold_of(key: tuple) -> str | None:
+    fx, fy, cx, cy, w, h, distortion = key
+    return distortion_fold(Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=w, height=h, distortion=dict(distortion)))
+
+
+def _fold(camera: Camera) -> str | None:
+    """``distortion_fold`` once per distinct camera: frames with intrinsics of their own mostly repeat one."""
+    if not camera.has_distortion:
+        return None
+    return _fold_of((camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
+                     tuple(sorted(camera.distortion.items()))))
 
 
 def camera_to_dict(camera: Camera) -> dict[str, Any]:
