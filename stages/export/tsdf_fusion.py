@@ -132,7 +132,14 @@ class TSDFFusion:
         self._colors: list[np.ndarray] = []
 
     def integrate(self, camera: Camera, c2w: np.ndarray, rgb: np.ndarray, z_depth: np.ndarray) -> None:
-        """Fuse one view: ``rgb`` [H, W, 3] in [0, 1], ``z_depth`` [H, W] (0 = skip the pixel)."""
+        """Fuse one view: ``rgb`` [H, W, 3] in [0, 1], ``z_depth`` [H, W] (0 = skip the pixel).
+
+        ``camera`` must be a pinhole: open3d projects the voxels through ``intrinsic_matrix`` alone, so a distorted
+        view would land its pixels up to the distortion's shift off their rays (the exporter renders pinhole views,
+        ``render_camera``; docs/export.md, "How the geometry is made")."""
+        if camera.has_distortion:
+            raise ValueError(f"TSDF fusion of a camera with lens distortion {camera.distortion}: open3d projects "
+                             "without it; render the view through a pinhole camera (exporter.render_camera)")
         valid = int(np.count_nonzero(z_depth))
         if valid == 0:
             return

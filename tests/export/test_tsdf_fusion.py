@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import open3d as o3d
+import pytest
 
 from stages.export.object_parts import object_pixels
 from stages.export.tsdf_fusion import (
@@ -178,3 +179,14 @@ def test_an_edge_across_the_rows_and_an_accumulation_of_one_half():
     acc[0, 0] = 0.49
     out = fusable_depth(cam, distance, acc, FusionSettings(voxel=0.1))
     assert out[0, 0] == 0 and np.allclose(out.reshape(-1)[1:], 2.0)
+
+
+def test_a_distorted_view_is_refused_rather_than_fused_as_a_pinhole():
+    """open3d projects voxels through the 3x3 intrinsics alone: a view with k1 = -0.1 would put the corner pixels of
+    this 48x36 camera (0.73 focal lengths out) 0.1 x 0.73^3 x 40 = 1.6 px off their rays, so fusion takes pinhole
+    views only."""
+    lens = Camera(fx=40.0, fy=40.0, cx=24.0, cy=18.0, width=48, height=36, distortion={"k1": -0.1})
+    fusion = TSDFFusion(np.array([[-1.0] * 3, [1.0] * 3]), FusionSettings(voxel=0.05))
+    with pytest.raises(ValueError, match=r"lens distortion.*render the view through a pinhole camera"):
+        fusion.integrate(lens, np.eye(4), np.zeros((36, 48, 3)), np.ones((36, 48), np.float32))
+    assert fusion.pixels_fused == 0
