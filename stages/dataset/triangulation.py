@@ -10,6 +10,7 @@ runs COLMAP by default, so the same dataset gives the same points (docs/poses.md
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,10 +25,18 @@ from stages.scene.atomic_io import scratch_folder
 from .assemble import place_image
 
 
-def _colmap_params(camera: Camera) -> list[float]:
-    """OPENCV parameters (fx, fy, cx, cy, k1, k2, p1, p2); k3 and k4 are left out (points only feed normals)."""
+def _colmap_model(cameras: list[Camera]) -> str:
+    """COLMAP's model for the dataset's cameras: OPENCV (fx, fy, cx, cy, k1, k2, p1, p2), or FULL_OPENCV where a camera
+    has k3, whose radial factor ``(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)`` is OpenCV's
+    polynomial with its denominator's k4..k6 at 0 (COLMAP's k4 is not nerfstudio's r^8 term)."""
+    return "FULL_OPENCV" if any(c.distortion.get("k3", 0.0) for c in cameras) else "OPENCV"
+
+
+def _colmap_params(camera: Camera, model: str = "OPENCV") -> list[float]:
+    """``camera``'s parameters in ``model``'s order (``_colmap_model``)."""
     d = camera.distortion
-    return [camera.fx, camera.fy, camera.cx, camera.cy, *(float(d.get(k, 0.0)) for k in ("k1", "k2", "p1", "p2"))]
+    params = [camera.fx, camera.fy, camera.cx, camera.cy, *(float(d.get(k, 0.0)) for k in ("k1", "k2", "p1", "p2"))]
+    return [*params, float(d.get("k3", 0.0)), 0.0, 0.0, 0.0] if model == "FULL_OPENCV" else params
 
 
 def triangulate_dataset(ds: SceneDataset, seed: int = 0) -> o3d.geometry.PointCloud:
@@ -46,6 +55,12 @@ def triangulate_dataset(ds: SceneDataset, seed: int = 0) -> o3d.geometry.PointCl
         cfg = PosesConfig(frames_dir=images, out_dir=work / "unused", seed=seed)
         database = work / "database.db"
         per_image = any(f.camera is not None for f in ds.frames)
+        cameras = [ds.camera_of(f) for f in ds.frames]
+        model_name = _colmap_model(cameras)
+        if any(c.distortion.get("k4", 0.0) for c in cameras):  # nerfstudio's r^8 term: no COLMAP model has it
+            warnings.warn(f"{ds.root / 'transforms.json'}: COLMAP has no model with the r^8 coefficient k4; the "
+                          "points the orientation reads (for the floor's and walls' normals only) are triangulated "
+                          "without it; fix: pass --points to give a point cloud", stacklevel=2)
         with colmap_log_level(False):
             pycolmap.set_random_seed(seed=seed)
             extraction = pycolmap.FeatureExtractionOptions(num_threads=1, max_image_size=cfg.max_image_size,
@@ -54,7 +69,7 @@ def triangulate_dataset(ds: SceneDataset, seed: int = 0) -> o3d.geometry.PointCl
             pycolmap.extract_features(database_path=database, image_path=images, image_names=names,
                                       camera_mode=pycolmap.CameraMode.PER_IMAGE if per_image
                                       else pycolmap.CameraMode.SINGLE,
-                                      reader_options=pycolmap.ImageReaderOptions(camera_model="OPENCV"),
+                                      reader_options=pycolmap.ImageReaderOptions(camera_model=model_name),
                                       extraction_options=extraction, device=pycolmap.Device.cpu)
             match_features(cfg, database, resolve_matcher(cfg, len(names)))
             db = pycolmap.Database.open(str(database))
@@ -63,7 +78,7 @@ def triangulate_dataset(ds: SceneDataset, seed: int = 0) -> o3d.geometry.PointCl
                 stored = db.read_all_images()
                 camera_of = {im.camera_id: ds.camera_of(by_name[im.name]) for im in stored}
                 for cam in db.read_all_cameras():
-                    cam.params = _colmap_params(camera_of[cam.camera_id])
+                    cam.params = _colmap_params(camera_of[cam.camera_id], model_name)
                     model.add_camera_with_trivial_rig(cam)
                 for im in stored:
                     rotation, translation = cam_from_world_from_c2w_opengl(np.asarray(by_name[im.name].c2w))

@@ -60,6 +60,26 @@ def test_the_triangulation_camera_is_the_dataset_s_camera_in_colmap_s_opencv_ord
     np.testing.assert_allclose(_projected_by_colmap(colmap, camera), np.stack([U + 0.5, V + 0.5], -1), atol=1e-4)
 
 
+def test_a_camera_with_k3_is_triangulated_with_colmap_s_full_opencv_model() -> None:
+    """OPENCV has no k3: a dataset camera with one gets FULL_OPENCV, whose radial factor (1 + k1 r^2 + k2 r^4 +
+    k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6) is OpenCV's polynomial with k4..k6 at 0; COLMAP then projects the
+    dataset camera's rays back onto their pixels (with OPENCV, k3 dropped, the corner lands elsewhere)."""
+    from stages.dataset.triangulation import _colmap_model
+
+    camera = Camera(fx=100.0, fy=92.0, cx=81.0, cy=58.0, width=160, height=120,
+                    distortion={"k1": -0.05, "k2": 0.02, "p1": 0.004, "p2": -0.006, "k3": 0.03})
+    assert _colmap_model([camera]) == "FULL_OPENCV"
+    assert _colmap_model([Camera(fx=100.0, fy=92.0, cx=81.0, cy=58.0, width=160, height=120,
+                                 distortion={"k1": -0.05})]) == "OPENCV"
+    colmap = pycolmap.Camera.create_from_model_name(1, "FULL_OPENCV", 1.0, 160, 120)
+    assert colmap.params_info.replace(" ", "") == "fx,fy,cx,cy,k1,k2,p1,p2,k3,k4,k5,k6"
+    colmap.params = _colmap_params(camera, "FULL_OPENCV")
+    np.testing.assert_allclose(_projected_by_colmap(colmap, camera), np.stack([U + 0.5, V + 0.5], -1), atol=1e-4)
+    opencv = pycolmap.Camera.create_from_model_name(1, "OPENCV", 1.0, 160, 120)
+    opencv.params = _colmap_params(camera)
+    assert np.abs(_projected_by_colmap(opencv, camera) - np.stack([U + 0.5, V + 0.5], -1)).max() > 1.0  # 1.24 px
+
+
 def test_a_colmap_model_s_two_focal_lengths_are_read_for_the_pose_comparison(tmp_path: Path) -> None:
     camera = Camera(fx=100.0, fy=92.0, cx=81.0, cy=58.0, width=160, height=120)
     rec = synthetic_model([f"frame_{k:05d}.png" for k in range(4)], orbit_poses(4), camera=camera, model="PINHOLE",
