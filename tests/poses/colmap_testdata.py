@@ -18,6 +18,8 @@ from stages.poses import cam_from_world_from_c2w_opengl
 from stages.scene import Camera
 
 RADIAL_K = (0.02, -0.01)
+OPENCV_K = (-0.04, 0.01, 0.002, -0.003)
+"""k1, k2, p1, p2 of the OPENCV model's camera."""
 
 
 def colmap_camera(camera: Camera, model: str = "RADIAL", camera_id: int = 1) -> pycolmap.Camera:
@@ -25,6 +27,7 @@ def colmap_camera(camera: Camera, model: str = "RADIAL", camera_id: int = 1) -> 
     params = {"SIMPLE_PINHOLE": [camera.fx, camera.cx, camera.cy],
               "PINHOLE": [camera.fx, camera.fy, camera.cx, camera.cy],
               "RADIAL": [camera.fx, camera.cx, camera.cy, *RADIAL_K],
+              "OPENCV": [camera.fx, camera.fy, camera.cx, camera.cy, *OPENCV_K],
               "OPENCV_FISHEYE": [camera.fx, camera.fy, camera.cx, camera.cy, 0.01, 0.0, 0.0, 0.0]}[model]
     cam.params = params
     return cam

@@ -17,7 +17,7 @@ import numpy as np
 import open3d as o3d
 import pycolmap
 import pytest
-from colmap_testdata import RADIAL_K, default_scene, synthetic_model, write_model
+from colmap_testdata import OPENCV_K, RADIAL_K, default_scene, synthetic_model, write_model
 from nerfstudio_mirror import read_like_nerfstudio
 from poses_testdata import SMALL_CAMERA
 
@@ -26,7 +26,7 @@ from stages.poses.cli import main as poses_main
 from stages.poses.colmap_import import ImportConfig, import_model
 from stages.poses.errors import PoseQualityError, StaticCameraError
 from stages.poses.model_export import transforms_dict
-from stages.scene import STAGE_MARKER, InputError, look_at, read_scene
+from stages.scene import STAGE_MARKER, InputError, look_at, project_points, read_scene
 
 NUMBERS, POSES = default_scene(12)
 COLMAP_NAMES = [f"{i:04d}.jpg" for i in NUMBERS]
@@ -148,6 +148,31 @@ def test_model_made_at_full_resolution_is_rescaled(capture: tuple[Path, Path], t
     rec = pycolmap.Reconstruction(out / "sparse" / "0")
     rec.update_point_3d_errors()  # recomputed from the rescaled camera and keypoints: still exact
     assert rec.compute_mean_reprojection_error() < 1e-6
+
+
+def test_an_opencv_model_at_full_resolution_keeps_its_distortion_through_the_import(capture: tuple[Path, Path],
+                                                                                    tmp_path: Path) -> None:
+    """COLMAP OPENCV (fx, fy, cx, cy, k1, k2, p1, p2) of the photos at twice the frames' size -> transforms.json
+    (camera_model OPENCV, focal and centre halved, the coefficients as they were: they act on normalised
+    coordinates) -> the dataset Camera, which projects every 3D point of sparse/0 onto its (rescaled) keypoint."""
+    _source, frames = capture
+    out = tmp_path / "poses"
+    import_model(ImportConfig(model_dir=_model(tmp_path, scale=2, model="OPENCV"), out_dir=out, frames_dir=frames))
+    transforms = json.loads((out / "transforms.json").read_text())
+    assert transforms["camera_model"] == "OPENCV"
+    assert (transforms["k1"], transforms["k2"], transforms["p1"], transforms["p2"]) == OPENCV_K
+    assert transforms["fl_x"] == pytest.approx(SMALL_CAMERA.fx) and transforms["cy"] == pytest.approx(SMALL_CAMERA.cy)
+    ds = read_scene(out, validate=True)
+    assert ds.camera.distortion == dict(zip(("k1", "k2", "p1", "p2"), OPENCV_K, strict=True))
+    rec = pycolmap.Reconstruction(out / "sparse" / "0")  # written in the world of transforms.json
+    pose_of = {Path(f.file_path).name: f.c2w for f in ds.frames}
+    misses = []
+    for image in rec.images.values():
+        seen = [p for p in image.points2D if p.has_point3D()]
+        xyz = np.array([rec.points3D[p.point3D_id].xyz for p in seen])
+        uv, _ = project_points(ds.camera, pose_of[image.name], xyz)
+        misses.append(np.abs(uv - np.array([p.xy for p in seen])).max())
+    assert max(misses) < 1e-6
 
 
 def test_other_aspect_ratio_is_refused(capture: tuple[Path, Path], tmp_path: Path) -> None:
