@@ -116,13 +116,15 @@ def _newton_undistort(camera: Camera, xd: np.ndarray, yd: np.ndarray) -> tuple[n
         sx = np.where(ok, (j22 * afx - j12 * afy) / safe, 0.0)
         sy = np.where(ok, (j11 * afy - j12 * afx) / safe, 0.0)
         t = np.ones_like(ax)
-        for _ in range(HALVINGS):
-            nx, ny = distort_normalized(camera, ax - t * sx, ay - t * sy)
-            nx, ny = nx - axd, ny - ayd
+        nx, ny = distort_normalized(camera, ax - sx, ay - sy)
+        nx, ny = nx - axd, ny - ayd
+        for _ in range(HALVINGS):  # (nx, ny) is always the residual at step t
             worse = ~(np.hypot(nx, ny) < norm)
             if not worse.any():
                 break
             t = np.where(worse, 0.5 * t, t)
+            nx, ny = distort_normalized(camera, ax - t * sx, ay - t * sy)
+            nx, ny = nx - axd, ny - ayd
         better = np.hypot(nx, ny) < norm
         x[active] = np.where(better, ax - t * sx, ax)
         y[active] = np.where(better, ay - t * sy, ay)
