@@ -423,9 +423,11 @@ def _check_camera_effects(spec: CaptureSpec, path: Path) -> None:
     if not 1 <= v.blur_samples <= MAX_BLUR_SAMPLES:
         raise CaptureSpecError(path, f"video.blur_samples is {v.blur_samples}, outside [1, {MAX_BLUR_SAMPLES}]",
                                "give the number of sub-frame renders averaged per frame, e.g. 8 (each costs a render)")
-    from .lens import lens_camera, lens_problem  # imports this module
+    from stages.scene.camera import distortion_fold
 
-    problem = lens_problem(lens_camera(v))
+    from .lens import lens_camera  # imports this module
+
+    problem = distortion_fold(lens_camera(v))
     if problem is not None:
         d = dataclasses.asdict(v.distortion)
         raise CaptureSpecError(path, f"video.distortion {d}: {problem}",
