@@ -122,10 +122,12 @@ def split_model_warning(n_models: int, left_out: list[str], ordered: list[str], 
     """The warning for a run that passed the registration gate although COLMAP's frames broke into ``n_models``
     separate models: only the largest is kept, so ``left_out`` (the frames the kept model does not pose: those of
     the other models and any that no model posed, in playback ``ordered``) are missing from the dataset; a user
-    should know which, and why. COLMAP does not say which model a left-out frame was in, so neither does this."""
-    if n_models <= 1:
+    should know which, and why. COLMAP does not say which model a left-out frame was in, so neither does this.
+    None when the kept model poses every frame: COLMAP then made a second model of frames the first one also posed
+    (seen on a blurred handheld capture: 100 of 100 frames in the largest of two), and nothing is lost."""
+    if n_models <= 1 or not left_out:
         return None
-    which = compact_names(left_out, limit=8, order=ordered) if left_out else "none"
+    which = compact_names(left_out, limit=8, order=ordered)
     return (f"COLMAP's frames broke into {n_models} separate models (no shared features join them: a cut, a jump or "
             f"a stretch without texture); the largest is kept, and the {len(left_out)} frame(s) it does not pose (of "
             f"the other models, or of none) are left out: {which}. To keep them, {advice}")

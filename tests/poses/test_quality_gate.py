@@ -161,6 +161,7 @@ def test_feature_shortage_detail_and_advice(tmp_path: Path) -> None:
 def test_a_run_that_passes_with_several_models_warns_with_the_frames_it_leaves_out():
     ordered = [f"frame_{i:05d}.png" for i in range(10)]
     assert split_model_warning(1, ordered[7:], ordered, "try X") is None  # one model: the gate said all there is
+    assert split_model_warning(2, [], ordered, "try X") is None  # the kept model poses every frame: nothing lost
     line = split_model_warning(2, ordered[7:], ordered, "try X")
     assert "broke into 2 separate models" in line
     assert "the 3 frame(s) it does not pose (of the other models, or of none) are left out" in line
