@@ -423,6 +423,12 @@ def _check_camera_effects(spec: CaptureSpec, path: Path) -> None:
     if not 1 <= v.blur_samples <= MAX_BLUR_SAMPLES:
         raise CaptureSpecError(path, f"video.blur_samples is {v.blur_samples}, outside [1, {MAX_BLUR_SAMPLES}]",
                                "give the number of sub-frame renders averaged per frame, e.g. 8 (each costs a render)")
+    for key, value in dataclasses.asdict(v.distortion).items():
+        # before the fold check: a NaN coefficient is no distortion to Camera.has_distortion, so the check would pass
+        # it and the truth camera would carry a NaN every reader of transforms.json refuses
+        if not math.isfinite(value):
+            raise CaptureSpecError(path, f"video.distortion.{key} is {value}",
+                                   "give a finite coefficient (0 for none), e.g. k1: -0.05")
     from stages.scene.camera import distortion_fold
 
     from .lens import lens_camera  # imports this module

@@ -94,6 +94,10 @@ REFUSED = [
     (lambda d: d["video"].update(distortion={"k2": -0.6}), "is the image of no ray"),
     # nor one of k1 = -0.2, just (r (1 - 0.2 r^2) peaks at 0.861 < 0.865)
     (lambda d: d["video"].update(distortion={"k1": -0.2}), "is the image of no ray"),
+    # a NaN coefficient makes Camera.has_distortion False (abs(nan) > 0 is False): the fold check passed it, the
+    # frames were a pinhole's and truth/transforms.json carried k1 NaN, which every reader refuses
+    (lambda d: d["video"].update(distortion={"k1": float("nan")}), "video.distortion.k1 is nan"),
+    (lambda d: d["video"].update(distortion={"p2": float("-inf")}), "video.distortion.p2 is -inf"),
 ]
 
 
