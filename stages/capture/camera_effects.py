@@ -29,11 +29,12 @@ def exposure_offsets(video: VideoSpec) -> np.ndarray:
     return ((np.arange(n) + 0.5) / n - 0.5) * video.shutter
 
 
-def row_offsets(video: VideoSpec) -> np.ndarray:
-    """When each sensor row is exposed (frame intervals from the frame's time): the top row first, the middle row
-    (of an odd height; between the two middle rows of an even one) at the frame's time."""
-    h = video.height
-    return (np.arange(h) / (h - 1) - 0.5) * video.rolling_shutter
+def row_offsets(video: VideoSpec, rows: np.ndarray | None = None) -> np.ndarray:
+    """When each sensor row (or fractional row: a band's middle) is exposed, in frame intervals from the frame's
+    time: the top row first, the middle row (of an odd height; between the two middle rows of an even one) at the
+    frame's time. ``rows`` defaults to every row of the image."""
+    rows = np.arange(video.height) if rows is None else rows
+    return (rows / (video.height - 1) - 0.5) * video.rolling_shutter
 
 
 class FrameRenderer:
@@ -69,8 +70,7 @@ class FrameRenderer:
             return self.renderer.render(c2w, states_at(spec, np.array([i + offset]))[0])
         c2w_rows = camera_poses_at(spec, i + offset + self.rows)
         c2w_rows[:, :3, 3] *= spec.units.per_metre
-        v = spec.video
-        middle_times = i + offset + (self._band_middle / (v.height - 1) - 0.5) * v.rolling_shutter
+        middle_times = i + offset + row_offsets(spec.video, self._band_middle)
         row_states = states_at(spec, middle_times)[self._band_of_row]
         return self.renderer.render_rows(c2w_rows, row_states)
 
