@@ -311,3 +311,29 @@ def test_rows_of_one_pose_and_state_render_as_a_global_shutter(small_spec, super
     assert np.allclose(mixed["rgb"][15:], closed["rgb"][15:], atol=1e-5)
     assert np.allclose(mixed["rgb"][:15], whole["rgb"][:15], atol=1e-5)
     assert not np.allclose(closed["rgb"], whole["rgb"], atol=1e-3)  # the states show
+
+
+def test_rows_of_two_poses_take_their_own_poses_in_millimetres_and_supersampled(small_spec):
+    """The top half of the rows at one pose, the bottom half at a pose 20 cm to the side, in millimetres, with 2x2
+    supersampling: each half is what ``render`` gives at its own pose (sub-pixel rows share their pixel row's pose),
+    depth in millimetres as ``render``'s."""
+    from stages.capture.renderer import SceneRenderer
+    from stages.capture.spec import Units
+
+    spec = small_spec(n_frames=2, width=40, height=30)
+    spec.units = Units(name="mm", per_metre=1000.0)
+    spec.render.supersample = 2
+    renderer = SceneRenderer(spec)
+    top = camera_path(spec)[1]
+    top[:3, 3] *= 1000.0
+    bottom = top.copy()
+    bottom[:3, 3] += 200.0 * top[:3, 0]  # 20 cm along the camera's right
+    states = np.array([0.6, 0.8])
+    rows = renderer.render_rows(np.r_[np.repeat(top[None], 15, 0), np.repeat(bottom[None], 15, 0)],
+                                np.repeat(states[None], 30, axis=0))
+    for half, pose in ((slice(0, 15), top), (slice(15, 30), bottom)):
+        whole = renderer.render(pose, states)
+        assert np.allclose(rows["rgb"][half], whole["rgb"][half], atol=1e-5)
+        assert np.allclose(rows["depth"][half], whole["depth"][half], rtol=1e-5)
+        assert whole["depth"][half].max() > 500.0  # millimetres: the room is metres away
+    assert not np.allclose(renderer.render(top, states)["rgb"][15:], rows["rgb"][15:], atol=1e-3)  # the poses show

@@ -149,3 +149,61 @@ def test_transforms_json_with_a_folding_distortion_is_refused(tmp_path: Path) ->
     ):
         camera_from_dict(d, path, "top level")
     assert camera_from_dict(d | {"k2": 0.05}, path, "top level").distortion == {"k1": -0.3, "k2": 0.05}
+
+
+def test_the_jacobian_is_the_derivative_of_the_distortion() -> None:
+    """``_jacobian`` (used by Newton's steps and by ``distortion_fold``'s orientation test) against central
+    differences of ``distort_normalized`` with every coefficient non-zero: their error is ~h^2 = 1e-12."""
+    cam = Camera(fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=2, height=2,
+                 distortion={"k1": -0.21, "k2": 0.07, "k3": -0.013, "k4": 0.004, "p1": 0.011, "p2": -0.017})
+    x, y = np.array([0.31, -0.52, 0.77]), np.array([-0.44, 0.09, 0.63])
+    h = 1e-6
+    dx = [(a - b) / (2 * h) for a, b in zip(camera_module.distort_normalized(cam, x + h, y),
+                                            camera_module.distort_normalized(cam, x - h, y), strict=True)]
+    dy = [(a - b) / (2 * h) for a, b in zip(camera_module.distort_normalized(cam, x, y + h),
+                                            camera_module.distort_normalized(cam, x, y - h), strict=True)]
+    j11, j12, j22 = camera_module._jacobian(cam, x, y)
+    np.testing.assert_allclose(j11, dx[0], atol=1e-8)
+    np.testing.assert_allclose(j12, dy[0], atol=1e-8)  # d xd / dy
+    np.testing.assert_allclose(j12, dx[1], atol=1e-8)  # d yd / dx: the Jacobian is symmetric
+    np.testing.assert_allclose(j22, dy[1], atol=1e-8)
+
+
+def test_newton_converges_quadratically_from_the_distorted_point(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Started at the distorted corners of the 640x480 image (fx = 512, k1 = -0.3, k2 = 0.05, p1 = -p2 = 0.01),
+    Newton's worst residual falls as its square a step once near (2e-3, 4e-5, 3e-8, 2e-14 after steps 4 to 7):
+    eight steps are ample for 1e-13. A wrong Jacobian (a sign of its off-diagonal term, a coefficient) still
+    converges in the 60 allowed, linearly (1e-4 after 13 steps): this is where it shows."""
+    monkeypatch.setattr(camera_module, "NEWTON_STEPS", 8)
+    cam = Camera(fx=512.0, fy=512.0, cx=320.0, cy=240.0, width=640, height=480,
+                 distortion={"k1": -0.3, "k2": 0.05, "p1": 0.01, "p2": -0.01})
+    xd, yd = np.array([-319.5, 319.5, -319.5, 319.5]) / 512, np.array([-239.5, -239.5, 239.5, 239.5]) / 512
+    x, y = camera_module._newton_undistort(cam, xd, yd)
+    rx, ry = camera_module.distort_normalized(cam, x, y)
+    assert np.hypot(rx - xd, ry - yd).max() < 1e-13
+
+
+def test_a_fold_between_the_grid_pixels_is_found() -> None:
+    """k1 = -0.6, k2 = 0.16: the radial map's slope 1 - 1.8 r^2 + 0.8 r^4 is 0 at r^2 = 1 and 1.25, so it folds back
+    between r = 1 (r_d = 0.56) and 1.118 (r_d = 0.559): a band of r_d a thousandth wide, which no pixel of the
+    17 x 17 grid falls in at fx = 600 (every grid pixel has a ray where the map keeps its orientation). The image
+    reaches r_d = 399.3 / 600 = 0.666, beyond the fold: the disk of rays finds it, starting at r = 1."""
+    cam = Camera(fx=600.0, fy=600.0, cx=320.0, cy=240.0, width=640, height=480, distortion={"k1": -0.6, "k2": 0.16})
+    problem = distortion_fold(cam) or ""
+    assert problem.startswith("the distortion folds "), problem
+    radius = float(problem.split()[3])
+    assert 0.999 <= radius <= 1.012, problem  # the first of 129 radii (steps of 1.47 / 128) at or beyond 1
+
+
+def test_the_fold_check_of_one_camera_is_not_reused_for_another_principal_point(tmp_path: Path) -> None:
+    """The fold check is cached per camera: k1 = -0.3 at fx = 640 is fold-free with the principal point in the
+    middle (the corner 0.625 focal lengths out, short of the 0.703 peak) and folds with it at the bottom edge
+    (the top corners (-0.5, -0.75) focal lengths out: 0.90)."""
+    path = tmp_path / "transforms.json"
+    d = {"camera_model": "OPENCV", "fl_x": 640.0, "fl_y": 640.0, "cx": 320.0, "cy": 240.0, "w": 640, "h": 480,
+         "k1": -0.3}
+    assert camera_from_dict(d, path, "top level").distortion == {"k1": -0.3}
+    with pytest.raises(SceneError, match="cannot be inverted"):
+        camera_from_dict(d | {"cy": 480.0}, path, "top level")
+    with pytest.raises(SceneError, match="cannot be inverted"):
+        camera_from_dict(d | {"cx": 640.0, "cy": 240.0}, path, "top level")
