@@ -186,3 +186,19 @@ def test_a_turn_composes_onto_the_applied_transform_already_recorded(tiny_datase
     assert how.turned
     np.testing.assert_allclose(np.asarray(ds.nerfstudio["applied_transform"]), (how.new_from_old @ applied)[:3],
                                atol=1e-12)
+
+
+def test_a_camera_with_nerfstudios_k4_is_triangulated_with_a_warning_that_names_the_file(
+        tiny_dataset: SceneDataset) -> None:
+    """No COLMAP model has nerfstudio's r^8 term: the triangulation says so before it runs COLMAP (the warning
+    raised as an error here, so COLMAP does not run)."""
+    import dataclasses
+    import warnings
+
+    from stages.dataset.triangulation import triangulate_dataset
+
+    ds = dataclasses.replace(tiny_dataset, camera=dataclasses.replace(tiny_dataset.camera, distortion={"k4": 1e-4}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match=r"transforms\.json: COLMAP has no model with the r\^8 coefficient k4"):
+            triangulate_dataset(ds)
