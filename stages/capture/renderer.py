@@ -177,7 +177,6 @@ class SceneRenderer:
             "shadow_ids": np.stack(info["casters"]).reshape(-1, h, w),
         }
 
-
     def render_rows(self, c2w_rows: np.ndarray, row_states: np.ndarray, camera: Camera | None = None, *,
                     supersample: int | None = None, shadows: bool | None = None) -> dict[str, np.ndarray]:
         """Render with a pose and object states per image row, as a rolling shutter exposes them: ``c2w_rows``
